@@ -1,0 +1,135 @@
+"""Where rendered frames go: an H.264 .mp4 (imageio-ffmpeg, which ships its own ffmpeg),
+an animated .gif, one .png, or a directory of numbered PNGs. Each sink takes frames one at a
+time, so a run can be rendered while it records.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ._viz_common import check_file_output, prepare_dir, require
+
+# output kinds by file suffix; anything without a suffix (or an existing folder) is a PNG folder
+KINDS = {".mp4": "mp4", ".gif": "gif", ".png": "png"}
+
+
+def output_kind(out: str | os.PathLike, error: type[ValueError]) -> str:
+    """'mp4', 'gif', 'png' or 'dir' for an output path, or ``error`` for an unknown suffix."""
+    s = os.fspath(out)
+    p = Path(s)
+    if p.is_dir() or s.endswith(("/", os.sep)) or not p.suffix:
+        return "dir"
+    kind = KINDS.get(p.suffix.lower())
+    if kind is None:
+        raise error(f"cannot render to '{s}': the output must end in .mp4, .gif or .png, or be a directory")
+    return kind
+
+
+class VideoSink:
+    """Base sink: ``add(image)`` for each (H, W, 3) uint8 frame, then ``close()``."""
+
+    def __init__(self, path: Path, size: tuple[int, int], fps: float):
+        self.path, self.size, self.fps = path, size, fps
+        self.frames = 0
+
+    def add(self, image: np.ndarray) -> None:
+        """Append one frame."""
+        if image.shape != (self.size[1], self.size[0], 3) or image.dtype != np.uint8:
+            raise ValueError(f"frame must be {self.size[1]}x{self.size[0]}x3 uint8, got {image.shape} {image.dtype}")
+        self._add(np.ascontiguousarray(image))
+        self.frames += 1
+
+    def _add(self, image: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Finish the output (flush the encoder, write the file)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class Mp4Sink(VideoSink):
+    """H.264 (yuv420p, CRF 18) through imageio-ffmpeg's bundled ffmpeg."""
+
+    def __init__(self, path, size, fps, error):
+        super().__init__(path, size, fps)
+        ffmpeg = require("imageio_ffmpeg", "imageio-ffmpeg", "rendering .mp4", error)
+        if size[0] % 2 or size[1] % 2:
+            raise error(f"--size for .mp4 must have an even width and height (H.264 4:2:0), got {size[0]}x{size[1]}")
+        self._gen = ffmpeg.write_frames(
+            os.fspath(path), size, fps=fps, codec="libx264", pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
+            quality=None, macro_block_size=1, ffmpeg_log_level="error",
+            output_params=["-crf", "18", "-preset", "veryfast", "-movflags", "+faststart"])
+        self._gen.send(None)
+
+    def _add(self, image):
+        self._gen.send(image)
+
+    def close(self):
+        if self._gen is not None:
+            self._gen.close()
+            self._gen = None
+
+
+class GifSink(VideoSink):
+    """Animated GIF: each frame quantised to its own 255-colour palette, written at close."""
+
+    def __init__(self, path, size, fps, error):
+        super().__init__(path, size, fps)
+        self._pil = require("PIL.Image", "pillow", "rendering .gif", error)
+        self._frames = []
+
+    def _add(self, image):
+        im = self._pil.fromarray(image, "RGB")
+        self._frames.append(im.quantize(colors=255, method=self._pil.Quantize.FASTOCTREE, dither=self._pil.Dither.NONE))
+
+    def close(self):
+        if self._frames:
+            first, rest = self._frames[0], self._frames[1:]
+            first.save(self.path, save_all=True, append_images=rest, duration=max(20, int(round(1000 / self.fps))),
+                       loop=0, optimize=False, disposal=1)
+            self._frames = []
+
+
+class PngSink(VideoSink):
+    """One PNG: the last frame added."""
+
+    def __init__(self, path, size, fps, error):
+        super().__init__(path, size, fps)
+        self._pil = require("PIL.Image", "pillow", "rendering .png", error)
+        self._last = None
+
+    def _add(self, image):
+        self._last = image.copy()
+
+    def close(self):
+        if self._last is not None:
+            self._pil.fromarray(self._last, "RGB").save(self.path)
+            self._last = None
+
+
+class PngDirSink(VideoSink):
+    """A folder of numbered PNGs, ``frame_00000.png``, ``frame_00001.png``, ..."""
+
+    def __init__(self, path, size, fps, error):
+        super().__init__(path, size, fps)
+        self._pil = require("PIL.Image", "pillow", "rendering PNG frames", error)
+
+    def _add(self, image):
+        self._pil.fromarray(image, "RGB").save(self.path / f"frame_{self.frames:05d}.png", compress_level=3)
+
+
+def open_sink(out: str | os.PathLike, size: tuple[int, int], fps: float, error: type[ValueError]) -> VideoSink:
+    """The sink for ``out`` (decided by its suffix), checked writable before any frame is drawn."""
+    kind = output_kind(out, error)
+    if kind == "dir":
+        return PngDirSink(prepare_dir(out, error), size, fps, error)
+    path = check_file_output(out, error)
+    return {"mp4": Mp4Sink, "gif": GifSink, "png": PngSink}[kind](path, size, fps, error)
