@@ -232,21 +232,21 @@ def _data_array(a: np.ndarray, name: str | None, offset: int, tuples: bool = Fal
 
 
 def write_vtu(path: Path, part: Part) -> None:
-    """One part as a VTK XML UnstructuredGrid with raw appended binary data."""
-    blocks: list[np.ndarray] = []
-    offset = 0
+    """One part as a VTK XML UnstructuredGrid with raw appended binary data.
 
-    def add(a: np.ndarray, name: str | None, tuples: bool = False) -> str:
-        nonlocal offset
-        a = _array(a)
-        xml = _data_array(a, name, offset, tuples)
-        blocks.append(a)
-        offset += 8 + a.nbytes
-        return xml
-
+    The binary blocks are stored in the reverse of the order the XML lists them: VTK seeks to
+    each offset and does not mind, and meshio's raw-data reader (which relabels offsets one
+    block at a time) then never mistakes a relabelled offset for a pending one.
+    """
+    arrays: list[tuple[np.ndarray, str | None, bool]] = []
     lines = ['<?xml version="1.0"?>',
              '<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt64">',
              "<UnstructuredGrid>"]
+
+    def add(a: np.ndarray, name: str | None, tuples: bool = False) -> str:
+        arrays.append((_array(a), name, tuples))
+        return f"\0{len(arrays) - 1}\0"
+
     if part.field_data:
         lines.append("<FieldData>")
         lines += [add(v, k, tuples=True) for k, v in part.field_data.items()]
@@ -261,9 +261,16 @@ def write_vtu(path: Path, part: Part) -> None:
     lines += ["<Points>", add(part.points, "Points"), "</Points>"]
     lines += ["<Cells>", add(part.connectivity, "connectivity"), add(part.offsets, "offsets"), add(part.types, "types"),
               "</Cells>", "</Piece>", "</UnstructuredGrid>", '<AppendedData encoding="raw">']
+    # offsets: the last-listed array's block comes first
+    offsets, pos = [0] * len(arrays), 0
+    for k in reversed(range(len(arrays))):
+        offsets[k] = pos
+        pos += 8 + arrays[k][0].nbytes
+    xml = [(_data_array(arrays[int(ln[1:-1])][0], arrays[int(ln[1:-1])][1], offsets[int(ln[1:-1])], arrays[int(ln[1:-1])][2])
+            if ln.startswith("\0") else ln) for ln in lines]
     with open(path, "wb") as f:
-        f.write(("\n".join(lines) + "\n_").encode())
-        for a in blocks:
+        f.write(("\n".join(xml) + "\n_").encode())
+        for a, _, _ in reversed(arrays):
             f.write(np.uint64(a.nbytes).tobytes())
             f.write(a.tobytes())
         f.write(b"\n</AppendedData>\n</VTKFile>\n")
