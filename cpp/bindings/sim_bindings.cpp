@@ -54,7 +54,7 @@ Model build_model(const nb::dict& p) {
   m.die.mass = req(p, "die_mass");
   m.die.inertia = req3(p, "die_inertia");
   m.contact = ContactParams{req(p, "contact_margin"), req(p, "contact_stiffness"), req(p, "contact_drag")};
-  m.body = BodyParams{m.sph.rest_density, req(p, "die_linear_damping"), req(p, "die_angular_damping"),
+  m.body = BodyParams{req(p, "die_linear_damping"), req(p, "die_angular_damping"),
                       req(p, "die_restitution")};
   m.dt = DtParams{req(p, "dt_min"), req(p, "dt_max"), req(p, "cfl_advective"), req(p, "cfl_acoustic"),
                   req(p, "cfl_force"), req(p, "cfl_viscous")};

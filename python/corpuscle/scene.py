@@ -703,7 +703,7 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "die.contact_stiffness": _K(
         "float", 2.0e4, "1/s²", 0.0, 1e9, "spring acceleration per metre of penetration into the contact margin"
     ),
-    "die.contact_margin": _K("float", 0.5, "h", 0.0, 5.0, "contact margin around the die, in units of h", lo_open=True),
+    "die.contact_margin": _K("float", 0.16, "h", 0.0, 5.0, "contact margin around the die, in units of h", lo_open=True),
     "die.drag": _K("float", 20.0, "1/s", 0.0, 1e6, "relative-velocity drag rate on particles in the margin"),
     "die.restitution": _K("float", 0.3, "", 0.0, 1.0, "fraction of normal velocity kept when the die hits the wall"),
     "die.linear_damping": _K("float", 0.0, "1/s", 0.0, 1e4, "linear velocity damping rate of the die"),

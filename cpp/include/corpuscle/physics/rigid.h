@@ -53,6 +53,12 @@ CPS_HD CPS_INLINE float box_sdf(const Vec3& half, const Vec3& p, Vec3& n) {
   return qmax;
 }
 
+// signed distance from a world point to a body's surface (negative inside)
+CPS_HD CPS_INLINE float body_distance(const RigidBox& b, const RigidState& s, const Vec3& x) {
+  Vec3 n;
+  return box_sdf(b.half, qrotate_inv(s.q, x - s.x), n);
+}
+
 struct ContactParams {
   float margin;     // contact when the signed distance is below this (m)
   float stiffness;  // spring acceleration per metre of penetration into the margin (1/s^2)
@@ -76,20 +82,19 @@ CPS_HD CPS_INLINE bool body_contact(const ContactParams& c, const RigidBox& b, c
 }
 
 struct BodyParams {
-  float fluid_density;   // for buoyancy (kg/m^3)
   float linear_damping;  // 1/s
   float angular_damping; // 1/s
   float restitution;     // against the container wall
 };
 
 // semi-implicit Euler for a box under the fluid's reaction force/torque (container frame),
-// gravity + buoyancy in the frame's effective gravity, Coriolis, and damping
+// its weight in the frame's effective gravity, Coriolis, and damping. Buoyancy is not added:
+// it arrives through the contact reactions of the fluid pressing on the body.
 CPS_HD CPS_INLINE void integrate_box(const RigidBox& b, const BodyParams& p, const FrameMotion& f, const Vec3& force,
                                      const Vec3& torque, float dt, RigidState& s) {
   // effective gravity at the body centre (no Coriolis: it acts on the body's own velocity below)
   Vec3 g_eff = f.gravity - f.acc - cross(f.alpha, s.x) - cross(f.omega, cross(f.omega, s.x));
-  float buoyant = b.mass - p.fluid_density * b.volume();
-  Vec3 F = force + g_eff * buoyant - cross(f.omega, s.v) * (2.0f * b.mass) - s.v * (b.mass * p.linear_damping);
+  Vec3 F = force + g_eff * b.mass - cross(f.omega, s.v) * (2.0f * b.mass) - s.v * (b.mass * p.linear_damping);
   s.v += F * (dt / b.mass);
   s.x += s.v * dt;
   // Euler's equations in the body frame: I dw/dt = tau - w x (I w)

@@ -44,6 +44,16 @@ struct SphKernels {
     float t = h - r;
     return d * (-spiky_c * t * t / r);
   }
+  // fraction of the Poly6 kernel's mass beyond a plane at signed distance d from the particle
+  // (d > 0: plane outside the particle), 3-D: Gamma(s) = 1/2 - 315/256 F(s), s = d/h, with
+  // F(s) = s - 4 s^3/3 + 6 s^5/5 - 4 s^7/7 + s^9/9 the antiderivative of (1 - s^2)^4
+  CPS_HD float poly6_beyond_plane(float d) const {
+    static_assert(D == 3, "the half-space fraction is derived for 3-D Poly6");
+    float s = fclamp(d / h, -1.0f, 1.0f);
+    float s2 = s * s;
+    float F = s * (1.0f + s2 * (-4.0f / 3.0f + s2 * (6.0f / 5.0f + s2 * (-4.0f / 7.0f + s2 / 9.0f))));
+    return 0.5f - (315.0f / 256.0f) * F;
+  }
   // viscosity-kernel Laplacian
   CPS_HD float visc_lap(float r) const { return r >= h ? 0.0f : visc_lap_c * (h - r); }
 };

@@ -185,16 +185,22 @@ struct ReorderStage {
   }
 };
 
-// stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles
+// stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles.
+// Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
+// of the kernel (the die face taken as a plane), as if mirrored fluid filled the die, so
+// the pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
 struct DensityStage {
   const Model* model;
+  const Globals* g;
   Arrays a;
   GridView<D> grid;
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
     DensityVisitor<D> v{m.kern};
-    for_each_neighbor(grid, a.pos[i], true, v);
-    float rho = finish_density(m.sph, v.sum);
+    Vec3 x = a.pos[i];
+    for_each_neighbor(grid, x, true, v);
+    float cut = m.kern.poly6_beyond_plane(body_distance(m.die, g->die, x));
+    float rho = finish_density(m.sph, v.sum / (1.0f - fmin2(cut, 0.5f)));
     a.rho[i] = rho;
     a.prs[i] = tait_pressure(m.sph, rho);
   }

@@ -173,7 +173,7 @@ class SimImpl final : public Sim {
     Arrays s = arrays(nxt, cur);
     GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
     // 4. density and pressure
-    ex_.for_each(n, DensityStage{md, s, grid});
+    ex_.for_each(n, DensityStage{md, g, s, grid});
     ex_.mark(3);
     ex_.for_each(n, GhostCopyStage{md, g, s});
     ex_.mark(4);
