@@ -684,7 +684,7 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "fluid.rest_density": _K("float", 1000.0, "kg/m³", 0.0, 1e5, "rest density of the fluid", lo_open=True),
     "fluid.stiffness": _K("float", 12000.0, "Pa", 0.0, 1e10, "Tait equation-of-state stiffness B", lo_open=True),
     "fluid.gamma": _K("float", 7.0, "", 1.0, 10.0, "Tait equation-of-state exponent"),
-    "fluid.viscosity": _K("float", 2.0, "Pa·s", 0.0, 1e5, "dynamic viscosity (viscosity-kernel Laplacian)"),
+    "fluid.viscosity": _K("float", 10.0, "Pa·s", 0.0, 1e5, "dynamic viscosity (viscosity-kernel Laplacian)"),
     "fluid.xsph": _K("float", 0.1, "", 0.0, 1.0, "XSPH velocity smoothing factor"),
     "fluid.density_floor": _K(
         "float", 0.01, "", 0.0, 1.0, "lowest density allowed, as a fraction of rest density", lo_open=True

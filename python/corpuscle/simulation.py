@@ -195,6 +195,27 @@ class Simulation:
         added to the scene's shake schedule; every backend applies it identically."""
         self._sim.set_control([float(x) for x in acceleration], [float(x) for x in torque])
 
+    def evaluate(self) -> dict:
+        """Compute densities, pressures, accelerations and this state's reductions without
+        advancing; returns :meth:`state` (its ``chosen_dt`` is the dt a step would take)."""
+        self._sim.evaluate()
+        return self._sim.state()
+
+    def set_particles(self, positions, velocities=None) -> None:
+        """Replace the fluid state ((n, 3) arrays, n = n_particles); ids restart at 0..n-1."""
+        pos = np.ascontiguousarray(positions, dtype=np.float32)
+        vel = np.zeros_like(pos) if velocities is None else np.ascontiguousarray(velocities, dtype=np.float32)
+        self._sim.set_particles(pos, vel)
+
+    def set_die(self, position=None, orientation=None, velocity=None, angular_velocity=None) -> None:
+        """Set the die's pose (orientation as w, x, y, z) and velocities (container frame)."""
+        die = self._sim.state()["die"]
+        for key, val in (("position", position), ("orientation", orientation), ("velocity", velocity),
+                         ("angular_velocity", angular_velocity)):
+            if val is not None:
+                die[key] = [float(x) for x in val]
+        self._sim.set_die(die)
+
     # state ----------------------------------------------------------------------------
     def state(self) -> dict:
         """Scalars of the current state (time, dt, die pose, last step's reductions)."""
