@@ -6,10 +6,12 @@ namespace nb = nanobind;
 void bind_info(nb::module_& m);
 void bind_sim(nb::module_& m);
 void bind_init(nb::module_& m);
+void bind_kernels(nb::module_& m);
 
 NB_MODULE(_core, m) {
   m.doc() = "corpuscle compiled core (CPU serial/OpenMP and CUDA backends)";
   bind_info(m);
   bind_init(m);
+  bind_kernels(m);
   bind_sim(m);
 }

@@ -1,0 +1,61 @@
+// Small fixed-size float vectors; the dimension D is a template parameter (2 or 3).
+#pragma once
+#include "corpuscle/core/hd.h"
+
+namespace cps {
+
+template <int D>
+struct Vec {
+  float v[D];
+  CPS_HD float& operator[](int i) { return v[i]; }
+  CPS_HD const float& operator[](int i) const { return v[i]; }
+  CPS_HD static Vec zero() {
+    Vec r;
+    for (int k = 0; k < D; ++k) r.v[k] = 0.0f;
+    return r;
+  }
+};
+
+using Vec2 = Vec<2>;
+using Vec3 = Vec<3>;
+
+// element-wise arithmetic
+template <int D> CPS_HD CPS_INLINE Vec<D> operator+(Vec<D> a, const Vec<D>& b) {
+  for (int k = 0; k < D; ++k) a.v[k] += b.v[k];
+  return a;
+}
+template <int D> CPS_HD CPS_INLINE Vec<D> operator-(Vec<D> a, const Vec<D>& b) {
+  for (int k = 0; k < D; ++k) a.v[k] -= b.v[k];
+  return a;
+}
+template <int D> CPS_HD CPS_INLINE Vec<D> operator-(Vec<D> a) {
+  for (int k = 0; k < D; ++k) a.v[k] = -a.v[k];
+  return a;
+}
+template <int D> CPS_HD CPS_INLINE Vec<D> operator*(Vec<D> a, float s) {
+  for (int k = 0; k < D; ++k) a.v[k] *= s;
+  return a;
+}
+template <int D> CPS_HD CPS_INLINE Vec<D> operator*(float s, Vec<D> a) { return a * s; }
+template <int D> CPS_HD CPS_INLINE Vec<D>& operator+=(Vec<D>& a, const Vec<D>& b) {
+  for (int k = 0; k < D; ++k) a.v[k] += b.v[k];
+  return a;
+}
+template <int D> CPS_HD CPS_INLINE Vec<D>& operator-=(Vec<D>& a, const Vec<D>& b) {
+  for (int k = 0; k < D; ++k) a.v[k] -= b.v[k];
+  return a;
+}
+template <int D> CPS_HD CPS_INLINE float dot(const Vec<D>& a, const Vec<D>& b) {
+  float s = 0.0f;
+  for (int k = 0; k < D; ++k) s += a.v[k] * b.v[k];
+  return s;
+}
+template <int D> CPS_HD CPS_INLINE float norm2(const Vec<D>& a) { return dot(a, a); }
+template <int D> CPS_HD CPS_INLINE float norm(const Vec<D>& a) { return fsqrt(dot(a, a)); }
+
+// the 3-D cross product
+CPS_HD CPS_INLINE Vec3 cross(const Vec3& a, const Vec3& b) {
+  return Vec3{{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}};
+}
+
+}  // namespace cps

@@ -1,0 +1,90 @@
+// Weakly compressible SPH: Tait equation of state and the pair visitors for density and
+// forces. Each visitor is called by a spatial query (for_each_neighbor) for one particle i.
+#pragma once
+#include "corpuscle/physics/sph_kernels.h"
+
+namespace cps {
+
+// fluid constants shared by the visitors
+struct SphParams {
+  float mass;          // particle mass (kg)
+  float rest_density;  // rho_0 (kg/m^3)
+  float stiffness;     // Tait B (Pa)
+  float gamma;         // Tait exponent
+  float viscosity;     // dynamic viscosity mu (Pa s)
+  float xsph;          // XSPH epsilon
+  float density_floor; // lower bound on density (kg/m^3)
+};
+
+// Tait equation (Monaghan 1994; Becker & Teschner 2007, eq. 7), negative pressure clamped to 0
+CPS_HD CPS_INLINE float tait_pressure(const SphParams& p, float rho) {
+  float r = rho / p.rest_density;
+  float pr = p.stiffness * (fpow(r, p.gamma) - 1.0f);
+  return pr > 0.0f ? pr : 0.0f;
+}
+
+// speed of sound of the Tait fluid at rest density: c0^2 = gamma B / rho0
+CPS_HD CPS_INLINE float tait_sound_speed(const SphParams& p) {
+  return fsqrt(p.gamma * p.stiffness / p.rest_density);
+}
+
+// density: rho_i = m W(0) + sum_j m W(|x_ij|^2), fluid and ghost neighbours
+template <int D>
+struct DensityVisitor {
+  const SphKernels<D>& k;
+  float sum = 0.0f;
+  CPS_HD void operator()(int, const Vec<D>&, float r2) { sum += k.poly6(r2); }
+};
+
+// finish the density sum (self term is part of the neighbour sum: j == i has r2 = 0)
+CPS_HD CPS_INLINE float finish_density(const SphParams& p, float kernel_sum) {
+  float rho = p.mass * kernel_sum;
+  return rho > p.density_floor ? rho : p.density_floor;
+}
+
+// pressure, viscosity and XSPH on particle i (Mueller 2003 eqs. 10, 14; Monaghan 1989 XSPH):
+//   a_p    = -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky      (symmetric: momentum-conserving)
+//   a_visc =  mu / rho_i sum_j m (v_j - v_i) / rho_j lap W_visc
+//   dv_xsph = eps sum_{j fluid} m / rho_ij (v_j - v_i) W_poly6, rho_ij = (rho_i + rho_j) / 2
+template <int D>
+struct ForceVisitor {
+  const SphKernels<D>& k;
+  const SphParams& p;
+  const Vec<D>* vel;
+  const float* rho;
+  const float* prs;
+  int i;
+  int n_fluid;  // indices below are fluid, the rest ghosts (XSPH ignores ghosts)
+  Vec<D> vi;
+  float rho_i, pterm_i;
+  Vec<D> acc_p = Vec<D>::zero();
+  Vec<D> acc_v = Vec<D>::zero();
+  Vec<D> dv_xsph = Vec<D>::zero();
+
+  CPS_HD ForceVisitor(const SphKernels<D>& k_, const SphParams& p_, const Vec<D>* vel_, const float* rho_,
+                      const float* prs_, int i_, int n_fluid_)
+      : k(k_), p(p_), vel(vel_), rho(rho_), prs(prs_), i(i_), n_fluid(n_fluid_) {
+    vi = vel[i];
+    rho_i = rho[i];
+    pterm_i = prs[i] / (rho_i * rho_i);
+  }
+
+  CPS_HD void operator()(int j, const Vec<D>& d, float r2) {
+    if (j == i) return;
+    float r = fsqrt(r2);
+    float rho_j = rho[j];
+    Vec<D> dv = vel[j] - vi;
+    // symmetric pressure term
+    float pterm = pterm_i + prs[j] / (rho_j * rho_j);
+    acc_p -= k.spiky_grad(d, r) * (p.mass * pterm);
+    // viscosity (the 1/rho_i factor is applied in finish())
+    acc_v += dv * (p.mass * k.visc_lap(r) / rho_j);
+    // XSPH velocity smoothing over fluid neighbours only
+    if (j < n_fluid) dv_xsph += dv * (p.mass * k.poly6(r2) * 2.0f / (rho_i + rho_j));
+  }
+
+  CPS_HD Vec<D> acceleration() const { return acc_p + acc_v * (p.viscosity / rho_i); }
+  CPS_HD Vec<D> xsph_correction() const { return dv_xsph * p.xsph; }
+};
+
+}  // namespace cps

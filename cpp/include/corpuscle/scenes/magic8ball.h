@@ -1,0 +1,323 @@
+// The Magic 8-Ball (seed 001): SPH fluid in a sphere with mirrored ghosts, a rigid cube die
+// coupled two ways, shaking through the container frame, adaptive dt.
+//
+// Model (constant), Globals (per-scene mutable scalars that live with the particles, on the
+// device under CUDA) and Arrays (structure of arrays) are plain data; each stage below is a
+// functor run by a backend's parallel_for. Nothing here knows which backend runs it.
+#pragma once
+#include "corpuscle/physics/boundary.h"
+#include "corpuscle/physics/rigid.h"
+#include "corpuscle/physics/sph.h"
+#include "corpuscle/physics/timestep.h"
+#include "corpuscle/spatial/grid.h"
+
+namespace cps::m8 {
+
+constexpr int D = 3;
+constexpr int kMaxShakes = 32;
+
+// a time window of container shaking: linear acceleration and torque on the shell
+struct ShakeWindow {
+  float start, end;
+  Vec3 acc;
+  Vec3 torque;
+};
+
+// constant per-scene parameters
+struct Model {
+  int n_fluid;           // fluid particles (ghost slots: the same number again)
+  float h;               // smoothing length = cell size
+  SphParams sph;
+  SphKernels<D> kern;
+  float c0;              // sound speed
+  SphereWall wall;
+  float shell_inertia;   // kg m^2
+  float spin_damping;    // 1/s
+  Vec3 gravity;          // lab frame
+  RigidBox die;
+  ContactParams contact;
+  BodyParams body;
+  DtParams dt;
+  GridSpec<D> grid;
+  int n_shakes;
+  ShakeWindow shakes[kMaxShakes];
+};
+
+// per-step reductions over the fluid (combined with StepSums::combine, a fixed order per backend)
+struct StepSums {
+  float vmax2, amax2;    // largest squared speed / acceleration
+  float rho_err;         // largest |rho/rho0 - 1|
+  float rho_sum;         // for the mean density
+  float ke;              // kinetic energy (J)
+  Vec3 force, torque;    // reaction on the die
+  int contacts;          // particles touching the die
+
+  CPS_HD static StepSums identity() {
+    StepSums s;
+    s.vmax2 = s.amax2 = s.rho_err = s.rho_sum = s.ke = 0.0f;
+    s.force = s.torque = Vec3::zero();
+    s.contacts = 0;
+    return s;
+  }
+  CPS_HD static StepSums combine(const StepSums& a, const StepSums& b) {
+    StepSums s;
+    s.vmax2 = fmax2(a.vmax2, b.vmax2);
+    s.amax2 = fmax2(a.amax2, b.amax2);
+    s.rho_err = fmax2(a.rho_err, b.rho_err);
+    s.rho_sum = a.rho_sum + b.rho_sum;
+    s.ke = a.ke + b.ke;
+    s.force = a.force + b.force;
+    s.torque = a.torque + b.torque;
+    s.contacts = a.contacts + b.contacts;
+    return s;
+  }
+};
+struct SumsOp {
+  CPS_HD StepSums operator()(const StepSums& a, const StepSums& b) const { return StepSums::combine(a, b); }
+};
+
+// per-scene mutable scalars
+struct Globals {
+  double time;
+  double end_time;       // steps after it are no-ops (dt = 0)
+  long long step;
+  float dt;              // the dt of the last step
+  int n_ghost;
+  int done;              // end_time reached
+  int bad;               // 1 once a particle went non-finite or far outside
+  long long bad_step;
+  RigidState die;
+  Quat shell_q;          // container orientation (container -> lab)
+  Vec3 shell_omega;      // container angular velocity (container frame)
+  FrameMotion frame;     // this step's container-frame terms
+  Vec3 user_acc, user_torque;  // control set through the API, added to the schedule
+  StepSums sums;         // this step's reductions
+};
+
+// structure of arrays; fluid in [0, n_fluid), ghosts after it, capacity 2 n_fluid
+struct Arrays {
+  Vec3 *pos, *vel, *pos_alt, *vel_alt;
+  float *rho, *prs;
+  int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
+  uint32_t *keys, *keys_sorted;
+  int *idx, *perm;
+  int *inv;              // fluid original index -> sorted slot
+  int *src;              // ghost slot -> original index of its fluid particle
+  Vec3 *acc, *xsph;
+  StepSums* items;
+  uint32_t *cell_start, *cell_end;
+};
+
+// the control of the container at time t: schedule plus API input
+CPS_HD CPS_INLINE void control_at(const Model& m, const Globals& g, double t, Vec3& acc, Vec3& torque) {
+  acc = g.user_acc;
+  torque = g.user_torque;
+  for (int s = 0; s < m.n_shakes; ++s) {
+    if (t >= m.shakes[s].start && t < m.shakes[s].end) {
+      acc += m.shakes[s].acc;
+      torque += m.shakes[s].torque;
+    }
+  }
+}
+
+// set a flag from many threads (same value from all, so any order gives one result)
+CPS_HD CPS_INLINE void raise_flag(int* p) {
+#ifdef __CUDA_ARCH__
+  atomicExch(p, 1);
+#else
+  __atomic_store_n(p, 1, __ATOMIC_RELAXED);
+#endif
+}
+
+// stage 1: cell keys of fluid particles and of their ghosts (slot n + i), identity values;
+// item 0 also evaluates this step's container frame
+struct KeysStage {
+  const Model* model;
+  Globals* g;
+  Arrays a;
+  CPS_HD void operator()(int i) const {
+    const Model& m = *model;
+    const int n = m.n_fluid;
+    Vec3 x = a.pos[i];
+    a.keys[i] = m.grid.key(x, 0);
+    a.keys[n + i] = needs_ghost(m.wall, x, m.h) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
+    a.idx[i] = i;
+    a.idx[n + i] = n + i;
+    if (i == 0) {
+      Vec3 acc, torque;
+      control_at(m, *g, g->time, acc, torque);
+      FrameMotion f;
+      f.gravity = qrotate_inv(g->shell_q, m.gravity);
+      f.acc = acc;
+      f.alpha = torque * (1.0f / m.shell_inertia) - g->shell_omega * m.spin_damping;
+      f.omega = g->shell_omega;
+      g->frame = f;
+    }
+  }
+};
+
+// stage 2: gather particle arrays into sorted order, build ghosts, record cell ranges
+struct ReorderStage {
+  const Model* model;
+  Globals* g;
+  Arrays a;
+  CPS_HD void operator()(int j) const {
+    const Model& m = *model;
+    const int n = m.n_fluid, cap = 2 * n;
+    mark_cell_range(m.grid, a.keys_sorted, j, cap, a.cell_start, a.cell_end);
+    const uint32_t sentinel = m.grid.sentinel();
+    if (a.keys_sorted[j] >= sentinel) return;
+    int o = a.perm[j];
+    if (o < n) {
+      a.pos_alt[j] = a.pos[o];
+      a.vel_alt[j] = a.vel[o];
+      a.id_alt[j] = a.id[o];
+      a.inv[o] = j;
+    } else {
+      int f = o - n;
+      Vec3 x = a.pos[f];
+      a.pos_alt[j] = mirror_position(m.wall, x);
+      a.vel_alt[j] = mirror_velocity(x, a.vel[f]);
+      a.id_alt[j] = -1;
+      a.src[j] = f;
+    }
+    if (j + 1 == cap || a.keys_sorted[j + 1] >= sentinel) g->n_ghost = j + 1 - n;
+  }
+};
+
+// stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles.
+// Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
+// of the kernel (the die face taken as a plane), as if mirrored fluid filled the die, so
+// the pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
+struct DensityStage {
+  const Model* model;
+  const Globals* g;
+  Arrays a;
+  GridView<D> grid;
+  CPS_HD void operator()(int i) const {
+    const Model& m = *model;
+    DensityVisitor<D> v{m.kern};
+    Vec3 x = a.pos[i];
+    for_each_neighbor(grid, x, true, v);
+    float cut = m.kern.poly6_beyond_plane(body_distance(m.die, g->die, x));
+    float rho = finish_density(m.sph, v.sum / (1.0f - fmin2(cut, 0.5f)));
+    a.rho[i] = rho;
+    a.prs[i] = tait_pressure(m.sph, rho);
+  }
+};
+
+// stage 4: ghosts take the density and pressure of their fluid particle
+struct GhostCopyStage {
+  const Model* model;
+  const Globals* g;
+  Arrays a;
+  CPS_HD void operator()(int k) const {
+    const int j = model->n_fluid + k;
+    if (k >= g->n_ghost) return;
+    int f = a.inv[a.src[j]];
+    a.rho[j] = a.rho[f];
+    a.prs[j] = a.prs[f];
+  }
+};
+
+// stage 5: SPH forces, XSPH, container-frame terms and die coupling of fluid particles; the
+// per-particle contributions to this step's reductions
+struct ForceStage {
+  const Model* model;
+  const Globals* g;
+  Arrays a;
+  GridView<D> grid;
+  CPS_HD void operator()(int i) const {
+    const Model& m = *model;
+    ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
+    Vec3 x = a.pos[i];
+    for_each_neighbor(grid, x, true, fv);
+    Vec3 v = a.vel[i];
+    Vec3 acc = fv.acceleration() + frame_acceleration(g->frame, x, v);
+    StepSums s = StepSums::identity();
+    // die: contact spring + drag on the particle, reaction on the die
+    Vec3 ad;
+    if (body_contact(m.contact, m.die, g->die, x, v, ad)) {
+      acc += ad;
+      Vec3 F = ad * (-m.sph.mass);
+      s.force = F;
+      s.torque = cross(x - g->die.x, F);
+      s.contacts = 1;
+    }
+    a.acc[i] = acc;
+    a.xsph[i] = fv.xsph_correction();
+    float rho = a.rho[i];
+    float err = rho / m.sph.rest_density - 1.0f;
+    s.vmax2 = norm2(v);
+    s.amax2 = norm2(acc);
+    s.rho_err = err < 0.0f ? -err : err;
+    s.rho_sum = rho;
+    s.ke = 0.5f * m.sph.mass * s.vmax2;
+    a.items[i] = s;
+  }
+};
+
+// stage 6 (one item per scene): dt, die and container integration, clock
+struct FinalizeStage {
+  const Model* model;
+  Globals* g;
+  CPS_HD void operator()(int) const {
+    const Model& m = *model;
+    Globals& G = *g;
+    if (G.done || G.time >= G.end_time) {
+      G.done = 1;
+      G.dt = 0.0f;
+      return;
+    }
+    float vdie = norm(G.die.v);
+    float vmax = fmax2(fsqrt(G.sums.vmax2), vdie);
+    float nu = m.sph.viscosity / m.sph.rest_density;
+    float dt = choose_dt(m.dt, m.h, vmax, fsqrt(G.sums.amax2), m.c0, nu);
+    if (G.time + double(dt) > G.end_time) dt = float(G.end_time - G.time);
+    if (!finite(G.sums.vmax2) || !finite(G.sums.amax2)) G.bad = 1;
+    // the die under the fluid's reaction, then kept inside the sphere
+    integrate_box(m.die, m.body, G.frame, G.sums.force, G.sums.torque, dt, G.die);
+    keep_box_in_sphere(m.die, m.wall.radius, m.body.restitution, G.die);
+    // the container shell: angular velocity and orientation
+    G.shell_omega += G.frame.alpha * dt;
+    G.shell_q = qintegrate_body(G.shell_q, G.shell_omega, dt);
+    G.dt = dt;
+    G.time += double(dt);
+    G.step += 1;
+    if (G.bad && G.bad_step < 0) G.bad_step = G.step;
+  }
+};
+
+// stage 7: integrate fluid (symplectic Euler, XSPH-corrected drift) and enforce the wall
+struct IntegrateStage {
+  const Model* model;
+  Globals* g;
+  Arrays a;
+  CPS_HD void operator()(int i) const {
+    const Model& m = *model;
+    float dt = g->dt;
+    Vec3 v = a.vel[i] + a.acc[i] * dt;
+    Vec3 x = a.pos[i] + (v + a.xsph[i]) * dt;
+    reflect_at_wall(m.wall, x, v);
+    if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_flag(&g->bad);
+    a.pos[i] = x;
+    a.vel[i] = v;
+  }
+};
+
+// the face (1..6) whose outward normal points most toward the container's +z window
+CPS_HD CPS_INLINE int window_face(const Quat& q) {
+  // faces: +x=1, +y=2, +z=3, -z=4, -y=5, -x=6 (opposite faces sum to 7)
+  const int face_pos[3] = {1, 2, 3};
+  Vec3 ez{{0.0f, 0.0f, 1.0f}};
+  Vec3 up = qrotate_inv(q, ez);  // window direction in the body frame
+  int best = 0;
+  float bv = -1.0f;
+  for (int k = 0; k < 3; ++k) {
+    float c = up[k] < 0.0f ? -up[k] : up[k];
+    if (c > bv) { bv = c; best = k; }
+  }
+  return up[best] >= 0.0f ? face_pos[best] : 7 - face_pos[best];
+}
+
+}  // namespace cps::m8

@@ -1,0 +1,234 @@
+// Host orchestration of the Magic 8-Ball step, written once for every backend (Exec).
+// Exec supplies buffers, parallel_for (for_each / single), sort, reduce, copies and timing.
+#pragma once
+#include <cmath>
+#include <limits>
+
+#include "corpuscle/core/error.h"
+#include "corpuscle/scenes/magic8ball_api.h"
+
+namespace cps::m8 {
+
+// names of the pipeline stages, in order (for profiles)
+inline const char* const kStageNames[] = {"keys", "sort", "reorder", "density", "ghosts",
+                                          "forces", "reduce", "finalize", "integrate"};
+constexpr int kNumStages = 9;
+
+template <class Exec>
+class SimImpl final : public Sim {
+ public:
+  template <class T> using Buf = typename Exec::template Buffer<T>;
+
+  SimImpl(Exec ex, const Model& m, const InitialState& s) : ex_(std::move(ex)), m_(m) {
+    const int n = m.n_fluid, cap = 2 * n;
+    if (n <= 0) throw Error("magic8ball: no fluid particles");
+    model_.resize(1);
+    ex_.to_device(model_.data(), &m_, sizeof(Model));
+    g_.resize(1);
+    for (int p = 0; p < 2; ++p) {
+      pos_[p].resize(cap);
+      vel_[p].resize(cap);
+      id_[p].resize(cap);
+    }
+    rho_.resize(cap);
+    prs_.resize(cap);
+    keys_.resize(cap);
+    keys_sorted_.resize(cap);
+    idx_.resize(cap);
+    perm_.resize(cap);
+    inv_.resize(n);
+    src_.resize(cap);
+    acc_.resize(n);
+    xsph_.resize(n);
+    items_.resize(n);
+    cells_start_.resize(2 * size_t(m.grid.ncells));
+    cells_end_.resize(2 * size_t(m.grid.ncells));
+    // initial globals
+    Globals g{};
+    g.time = 0.0;
+    g.end_time = std::numeric_limits<double>::infinity();
+    g.step = 0;
+    g.dt = 0.0f;
+    g.bad_step = -1;
+    g.die = s.die;
+    g.shell_q = Quat::identity();
+    g.shell_omega = Vec3::zero();
+    g.user_acc = g.user_torque = Vec3::zero();
+    g.sums = StepSums::identity();
+    ex_.to_device(g_.data(), &g, sizeof(Globals));
+    set_particles(s.pos, s.vel);
+  }
+
+  const char* backend() const override { return ex_.name(); }
+  bool on_device() const override { return Exec::on_device; }
+  const Model& model() const override { return m_; }
+
+  void set_particles(const std::vector<Vec3>& pos, const std::vector<Vec3>& vel) override {
+    const int n = m_.n_fluid;
+    if (int(pos.size()) != n || int(vel.size()) != n)
+      throw Error("magic8ball: expected " + std::to_string(n) + " positions and velocities");
+    std::vector<int> ids(n);
+    for (int i = 0; i < n; ++i) ids[i] = i;
+    ex_.to_device(pos_[parity_].data(), pos.data(), n * sizeof(Vec3));
+    ex_.to_device(vel_[parity_].data(), vel.data(), n * sizeof(Vec3));
+    ex_.to_device(id_[parity_].data(), ids.data(), n * sizeof(int));
+    sorted_ = false;
+  }
+
+  Globals globals() override {
+    Globals g;
+    ex_.to_host(&g, g_.data(), sizeof(Globals));
+    return g;
+  }
+  void set_globals(const Globals& g) override { ex_.to_device(g_.data(), &g, sizeof(Globals)); }
+
+  void step(long long n) override {
+    for (long long k = 0; k < n; ++k) {
+      ex_.launch_step(parity_, [&] { enqueue_step(true); });
+      parity_ ^= 1;
+    }
+    sorted_ = n > 0 || sorted_;
+  }
+
+  void evaluate() override {
+    // the same stages as a step, without integration; dt is chosen from these forces
+    ex_.launch_step(-1, [&] { enqueue_step(false); });
+    parity_ ^= 1;
+    sorted_ = true;
+    ex_.synchronize();
+  }
+
+  double bench(long long n) override {
+    step(1);  // capture / warm the step outside the timing
+    ex_.synchronize();
+    return ex_.time([&] { step(n); });
+  }
+
+  std::vector<std::pair<std::string, double>> profile(long long n) override {
+    ex_.synchronize();
+    ex_.profile_begin();
+    for (long long k = 0; k < n; ++k) {
+      enqueue_step(true);
+      parity_ ^= 1;
+    }
+    auto ms = ex_.profile_end();
+    std::vector<std::pair<std::string, double>> out;
+    for (int s = 0; s < kNumStages && s < int(ms.size()); ++s) out.emplace_back(kStageNames[s], ms[s] / double(n));
+    return out;
+  }
+
+  void download(Field f, void* dst) override {
+    auto [p, count] = view(f);
+    ex_.synchronize();
+    ex_.to_host(dst, p, size_t(count) * field_bytes(f));
+  }
+
+  std::pair<void*, int> view(Field f) override {
+    // before the first step the arrays are in input order in the current buffers
+    const int n = m_.n_fluid;
+    const int cur = parity_;
+    switch (f) {
+      case Field::Position: return {pos_[cur].data(), n};
+      case Field::Velocity: return {vel_[cur].data(), n};
+      case Field::Density: return {rho_.data(), n};
+      case Field::Pressure: return {prs_.data(), n};
+      case Field::Id: return {id_[cur].data(), n};
+      case Field::Acceleration: return {acc_.data(), n};
+      case Field::GhostPosition: return {pos_[cur].data() + n, sorted_ ? globals().n_ghost : 0};
+      case Field::GhostVelocity: return {vel_[cur].data() + n, sorted_ ? globals().n_ghost : 0};
+    }
+    return {nullptr, 0};
+  }
+
+  static size_t field_bytes(Field f) {
+    switch (f) {
+      case Field::Density:
+      case Field::Pressure: return sizeof(float);
+      case Field::Id: return sizeof(int);
+      default: return sizeof(Vec3);
+    }
+  }
+
+ private:
+  // the step pipeline; parity_ selects the current buffers, the reorder writes the others
+  void enqueue_step(bool integrate) {
+    const Model& m = m_;
+    const int n = m.n_fluid, cap = 2 * n;
+    const int cur = parity_, nxt = parity_ ^ 1;
+    Model* md = model_.data();
+    Globals* g = g_.data();
+    Arrays a = arrays(cur, nxt);
+    // 1. keys of fluid and ghost slots
+    ex_.for_each(n, KeysStage{md, g, a});
+    ex_.mark(0);
+    // 2. sort by key
+    ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits());
+    ex_.mark(1);
+    // 3. reorder into the other buffers, ghosts built there, cell ranges
+    ex_.zero(a.cell_start, cells_start_.size() * sizeof(uint32_t));
+    ex_.zero(a.cell_end, cells_end_.size() * sizeof(uint32_t));
+    ex_.for_each(cap, ReorderStage{md, g, a});
+    ex_.mark(2);
+    // from here on the sorted arrays are current
+    Arrays s = arrays(nxt, cur);
+    GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
+    // 4. density and pressure
+    ex_.for_each(n, DensityStage{md, g, s, grid});
+    ex_.mark(3);
+    ex_.for_each(n, GhostCopyStage{md, g, s});
+    ex_.mark(4);
+    // 5. forces
+    ex_.for_each(n, ForceStage{md, g, s, grid});
+    ex_.mark(5);
+    // 6. reductions and the per-scene update
+    ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+    ex_.mark(6);
+    if (integrate) {
+      ex_.single(FinalizeStage{md, g});
+      ex_.mark(7);
+      ex_.for_each(n, IntegrateStage{md, g, s});
+      ex_.mark(8);
+    }
+  }
+
+  Arrays arrays(int cur, int nxt) {
+    Arrays a;
+    a.pos = pos_[cur].data();
+    a.vel = vel_[cur].data();
+    a.pos_alt = pos_[nxt].data();
+    a.vel_alt = vel_[nxt].data();
+    a.id = id_[cur].data();
+    a.id_alt = id_[nxt].data();
+    a.rho = rho_.data();
+    a.prs = prs_.data();
+    a.keys = keys_.data();
+    a.keys_sorted = keys_sorted_.data();
+    a.idx = idx_.data();
+    a.perm = perm_.data();
+    a.inv = inv_.data();
+    a.src = src_.data();
+    a.acc = acc_.data();
+    a.xsph = xsph_.data();
+    a.items = items_.data();
+    a.cell_start = cells_start_.data();
+    a.cell_end = cells_end_.data();
+    return a;
+  }
+
+  Exec ex_;
+  Model m_;
+  Buf<Model> model_;
+  Buf<Globals> g_;
+  Buf<Vec3> pos_[2], vel_[2];
+  Buf<int> id_[2];
+  Buf<float> rho_, prs_;
+  Buf<uint32_t> keys_, keys_sorted_;
+  Buf<int> idx_, perm_, inv_, src_;
+  Buf<Vec3> acc_, xsph_;
+  Buf<StepSums> items_;
+  Buf<uint32_t> cells_start_, cells_end_;
+  int parity_ = 0;
+  bool sorted_ = false;
+};
+
+}  // namespace cps::m8

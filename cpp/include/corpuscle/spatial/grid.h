@@ -1,0 +1,121 @@
+// Uniform cell grid keyed in Morton order, and its neighbour query.
+//
+// Particles are sorted by key each step and the arrays physically reordered. A key holds
+// the Morton code of the particle's cell plus a layer tag above it (layer 0: fluid,
+// layer 1: ghost), so each layer stays contiguous and sorted by cell; unused slots carry
+// kSentinel and sort last. Cell ranges are kept per (layer, cell).
+//
+// The query x visitor protocol: `for_each_neighbor(grid, xi, visitor)` calls
+// `visitor(j, xi - xj, r2)` for every particle j of the requested layers within the support
+// radius. Other indexes (all-pairs, neighbour lists, LBVH) implement the same call so the
+// physics visitors never change.
+#pragma once
+#include "corpuscle/core/vec.h"
+#include "corpuscle/spatial/morton.h"
+
+namespace cps {
+
+template <int D>
+struct GridSpec {
+  Vec<D> origin;   // lower corner of cell (0, ..., 0)
+  float cell;      // cell edge, >= support radius
+  float inv_cell;  // 1 / cell
+  int bits;        // Morton bits per axis; dims = 1 << bits per axis
+  int dims;        // cells per axis (power of two)
+  uint32_t ncells; // dims^D: cells of one layer
+  float h2;        // squared support radius used to cull candidates
+
+  CPS_HD uint32_t layer_bit() const { return uint32_t(1) << (D * bits); }
+  CPS_HD uint32_t sentinel() const { return uint32_t(2) << (D * bits); }
+  // number of key bits the sort must look at
+  CPS_HD int key_bits() const { return D * bits + 2; }
+
+  // integer cell of a position, clamped into the grid
+  CPS_HD void cell_of(const Vec<D>& x, int* c) const {
+    for (int k = 0; k < D; ++k) {
+      float f = (x[k] - origin[k]) * inv_cell;
+      int ci = finite(f) ? int(f >= 0.0f ? f : -1.0f) : 0;
+      c[k] = iclamp(ci, 0, dims - 1);
+    }
+  }
+  CPS_HD uint32_t key(const Vec<D>& x, int layer) const {
+    int c[D];
+    cell_of(x, c);
+    return morton_encode<D>(c) | (layer ? layer_bit() : 0u);
+  }
+};
+
+// build a grid covering [lo, hi] with cells of at least `support`, one spare cell each side
+template <int D>
+inline GridSpec<D> make_grid(const Vec<D>& lo, const Vec<D>& hi, float support) {
+  GridSpec<D> g;
+  g.cell = support;
+  g.inv_cell = 1.0f / support;
+  int need = 1;
+  for (int k = 0; k < D; ++k) {
+    int n = int((hi[k] - lo[k]) / support) + 3;
+    need = need > n ? need : n;
+  }
+  g.bits = 0;
+  while ((1 << g.bits) < need) ++g.bits;
+  g.dims = 1 << g.bits;
+  g.ncells = 1;
+  for (int k = 0; k < D; ++k) g.ncells *= uint32_t(g.dims);
+  for (int k = 0; k < D; ++k) g.origin[k] = lo[k] - support;
+  g.h2 = support * support;
+  return g;
+}
+
+// read-only view of the sorted particles and the cell table, passed by value to functors
+template <int D>
+struct GridView {
+  GridSpec<D> spec;
+  const Vec<D>* pos;          // sorted positions
+  const uint32_t* cell_start; // 2 * ncells entries: layer 0 then layer 1
+  const uint32_t* cell_end;
+};
+
+// visit every particle of the chosen layers within the support radius of xi
+template <int D, class Visitor>
+CPS_HD CPS_INLINE void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) {
+  int c[D];
+  g.spec.cell_of(xi, c);
+  const int nlayers = ghosts ? 2 : 1;
+  // the 3^D stencil of cells around c, x fastest
+  constexpr int kStencil = D == 3 ? 27 : 9;
+  for (int o = 0; o < kStencil; ++o) {
+    int cc[D];
+    int t = o;
+    bool inside = true;
+    for (int k = 0; k < D; ++k) {
+      cc[k] = c[k] + (t % 3) - 1;
+      t /= 3;
+      inside = inside && cc[k] >= 0 && cc[k] < g.spec.dims;
+    }
+    if (!inside) continue;
+    uint32_t m = morton_encode<D>(cc);
+    for (int layer = 0; layer < nlayers; ++layer) {
+      uint32_t slot = m + uint32_t(layer) * g.spec.ncells;
+      uint32_t end = g.cell_end[slot];
+      for (uint32_t j = g.cell_start[slot]; j < end; ++j) {
+        Vec<D> d = xi - g.pos[j];
+        float r2 = norm2(d);
+        if (r2 < g.spec.h2) visit(int(j), d, r2);
+      }
+    }
+  }
+}
+
+// record cell ranges of sorted key j (one thread per sorted slot; tables zeroed beforehand)
+template <int D>
+CPS_HD CPS_INLINE void mark_cell_range(const GridSpec<D>& g, const uint32_t* keys, int j, int n, uint32_t* start,
+                                       uint32_t* end) {
+  uint32_t k = keys[j];
+  if (k >= g.sentinel()) return;
+  // key without the layer tag plus layer offset = slot in the table
+  uint32_t slot = (k & (g.layer_bit() - 1u)) + ((k & g.layer_bit()) ? g.ncells : 0u);
+  if (j == 0 || keys[j - 1] != k) start[slot] = uint32_t(j);
+  if (j == n - 1 || keys[j + 1] != k) end[slot] = uint32_t(j + 1);
+}
+
+}  // namespace cps

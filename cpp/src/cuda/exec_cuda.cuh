@@ -1,0 +1,224 @@
+// The CUDA backend: one-thread-per-item kernels over the shared functors, CUB for sort and
+// reduce, a stream per simulation, CUDA graphs for steady-state steps, CUDA events for timing.
+#pragma once
+#include <cuda_runtime.h>
+
+#include <cub/cub.cuh>
+#include <utility>
+#include <vector>
+
+#include "corpuscle/core/error.h"
+
+namespace cps {
+
+template <class F>
+__global__ void k_for_each(int n, F f) {
+  int i = int(blockIdx.x) * int(blockDim.x) + int(threadIdx.x);
+  if (i < n) f(i);
+}
+
+template <class F>
+__global__ void k_single(F f) {
+  f(0);
+}
+
+// deterministic one-block reduction (fixed striding and tree), used for small inputs
+template <class T, class Op, int kThreads>
+__global__ void __launch_bounds__(kThreads) k_reduce_block(const T* in, int n, T* out, Op op, T init) {
+  using BlockReduce = cub::BlockReduce<T, kThreads>;
+  __shared__ typename BlockReduce::TempStorage tmp;
+  T acc = init;
+  for (int i = int(threadIdx.x); i < n; i += kThreads) acc = op(acc, in[i]);
+  T r = BlockReduce(tmp).Reduce(acc, op);
+  if (threadIdx.x == 0) *out = r;
+}
+
+struct CudaExec {
+  static constexpr bool on_device = true;
+  static constexpr int kBlock = 128;
+  static constexpr int kReduceThreads = 512;
+  static constexpr int kSmallReduce = 1 << 17;
+
+  // owning device buffer (zero-filled)
+  template <class T>
+  struct Buffer {
+    T* p = nullptr;
+    size_t n = 0;
+    Buffer() = default;
+    Buffer(const Buffer&) = delete;
+    Buffer& operator=(const Buffer&) = delete;
+    Buffer(Buffer&& o) noexcept : p(std::exchange(o.p, nullptr)), n(std::exchange(o.n, 0)) {}
+    ~Buffer() { if (p) cudaFree(p); }
+    void resize(size_t count) {
+      if (p) CPS_CUDA_CHECK(cudaFree(p));
+      p = nullptr;
+      n = count;
+      if (count == 0) return;
+      CPS_CUDA_CHECK(cudaMalloc(&p, count * sizeof(T)));
+      CPS_CUDA_CHECK(cudaMemset(p, 0, count * sizeof(T)));
+    }
+    T* data() { return p; }
+    const T* data() const { return p; }
+    size_t size() const { return n; }
+  };
+
+  CudaExec() { CPS_CUDA_CHECK(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking)); }
+  CudaExec(CudaExec&& o) noexcept
+      : stream_(std::exchange(o.stream_, nullptr)), temp_(std::exchange(o.temp_, nullptr)),
+        temp_bytes_(std::exchange(o.temp_bytes_, 0)) {
+    for (int p = 0; p < 2; ++p) {
+      graph_[p] = std::exchange(o.graph_[p], nullptr);
+      eager_[p] = o.eager_[p];
+    }
+  }
+  CudaExec(const CudaExec&) = delete;
+  ~CudaExec() {
+    for (auto& g : graph_)
+      if (g) cudaGraphExecDestroy(g);
+    for (auto& e : events_) cudaEventDestroy(e.second);
+    if (temp_) cudaFree(temp_);
+    if (stream_) cudaStreamDestroy(stream_);
+  }
+
+  const char* name() const { return "cuda"; }
+
+  template <class F>
+  void for_each(int n, const F& f) {
+    if (n <= 0) return;
+    k_for_each<<<(n + kBlock - 1) / kBlock, kBlock, 0, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  template <class F>
+  void single(const F& f) {
+    k_single<<<1, 1, 0, stream_>>>(f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // CUB's stable LSD radix sort over the key bits in use
+  void sort_pairs(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits) {
+    size_t bytes = 0;
+    CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
+    ensure_temp(bytes);
+    CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp_, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
+  }
+
+  // deterministic reduction: one block for small inputs, CUB's device reduce beyond
+  template <class T, class Op>
+  void reduce(const T* in, int n, T* out, Op op, T init) {
+    if (n <= kSmallReduce) {
+      k_reduce_block<T, Op, kReduceThreads><<<1, kReduceThreads, 0, stream_>>>(in, n, out, op, init);
+      CPS_CUDA_LAUNCH_CHECK();
+      return;
+    }
+    size_t bytes = 0;
+    CPS_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, in, out, n, op, init, stream_));
+    ensure_temp(bytes);
+    CPS_CUDA_CHECK(cub::DeviceReduce::Reduce(temp_, bytes, in, out, n, op, init, stream_));
+  }
+
+  void zero(void* p, size_t bytes) { CPS_CUDA_CHECK(cudaMemsetAsync(p, 0, bytes, stream_)); }
+  void to_host(void* dst, const void* src, size_t bytes) {
+    CPS_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToHost, stream_));
+    CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
+  }
+  void to_device(void* dst, const void* src, size_t bytes) {
+    CPS_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyHostToDevice, stream_));
+    CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
+  }
+  void synchronize() { CPS_CUDA_CHECK(cudaStreamSynchronize(stream_)); }
+
+  // a whole step: the first step of each parity runs eagerly (allocating CUB's temporary
+  // storage), later ones replay a CUDA graph captured once per parity
+  template <class F>
+  void launch_step(int parity, const F& enqueue) {
+    if (parity < 0 || profiling_ || !graphs_ || eager_[parity] < 1) {
+      if (parity >= 0) eager_[parity] += 1;
+      enqueue();
+      return;
+    }
+    if (!graph_[parity]) {
+      cudaGraph_t g;
+      CPS_CUDA_CHECK(cudaStreamBeginCapture(stream_, cudaStreamCaptureModeThreadLocal));
+      enqueue();
+      CPS_CUDA_CHECK(cudaStreamEndCapture(stream_, &g));
+      CPS_CUDA_CHECK(cudaGraphInstantiate(&graph_[parity], g, 0));
+      CPS_CUDA_CHECK(cudaGraphDestroy(g));
+    }
+    CPS_CUDA_CHECK(cudaGraphLaunch(graph_[parity], stream_));
+  }
+
+  // stage timing with CUDA events between stages
+  void profile_begin() {
+    profiling_ = true;
+    marks_.clear();
+    marks_.push_back({-1, event(0)});
+    CPS_CUDA_CHECK(cudaEventRecord(marks_.back().second, stream_));
+  }
+  void mark(int stage) {
+    if (!profiling_) return;
+    marks_.push_back({stage, event(marks_.size())});
+    CPS_CUDA_CHECK(cudaEventRecord(marks_.back().second, stream_));
+  }
+  std::vector<double> profile_end() {
+    profiling_ = false;
+    synchronize();
+    std::vector<double> ms;
+    for (size_t k = 1; k < marks_.size(); ++k) {
+      float t = 0.0f;
+      CPS_CUDA_CHECK(cudaEventElapsedTime(&t, marks_[k - 1].second, marks_[k].second));
+      int s = marks_[k].first;
+      if (s >= int(ms.size())) ms.resize(s + 1, 0.0);
+      ms[s] += t;
+    }
+    return ms;
+  }
+
+  // seconds for run(), between two events on the stream
+  template <class F>
+  double time(const F& run) {
+    cudaEvent_t a = event(0), b = event(1);
+    CPS_CUDA_CHECK(cudaEventRecord(a, stream_));
+    run();
+    CPS_CUDA_CHECK(cudaEventRecord(b, stream_));
+    CPS_CUDA_CHECK(cudaEventSynchronize(b));
+    float ms = 0.0f;
+    CPS_CUDA_CHECK(cudaEventElapsedTime(&ms, a, b));
+    return ms * 1e-3;
+  }
+
+  void set_graphs(bool on) { graphs_ = on; }
+
+ private:
+  void ensure_temp(size_t bytes) {
+    if (bytes <= temp_bytes_) return;
+    cudaStreamCaptureStatus st;
+    CPS_CUDA_CHECK(cudaStreamIsCapturing(stream_, &st));
+    if (st != cudaStreamCaptureStatusNone) throw Error("CUB temporary storage grew during graph capture");
+    CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
+    if (temp_) CPS_CUDA_CHECK(cudaFree(temp_));
+    CPS_CUDA_CHECK(cudaMalloc(&temp_, bytes));
+    temp_bytes_ = bytes;
+  }
+  // a pooled event (index k)
+  cudaEvent_t event(size_t k) {
+    while (events_.size() <= k) {
+      cudaEvent_t e;
+      CPS_CUDA_CHECK(cudaEventCreate(&e));
+      events_.push_back({int(events_.size()), e});
+    }
+    return events_[k].second;
+  }
+
+  cudaStream_t stream_ = nullptr;
+  void* temp_ = nullptr;
+  size_t temp_bytes_ = 0;
+  cudaGraphExec_t graph_[2] = {nullptr, nullptr};
+  int eager_[2] = {0, 0};
+  bool graphs_ = true;
+  bool profiling_ = false;
+  std::vector<std::pair<int, cudaEvent_t>> marks_;
+  std::vector<std::pair<int, cudaEvent_t>> events_;
+};
+
+}  // namespace cps

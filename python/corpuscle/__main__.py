@@ -1,0 +1,8 @@
+"""``python -m corpuscle`` runs the command line."""
+
+import sys
+
+from .cli import main
+
+# same exit codes as the console script
+sys.exit(main())

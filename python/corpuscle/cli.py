@@ -1,0 +1,668 @@
+"""The ``corpuscle`` command line.
+
+Subcommands live in one table, :data:`COMMANDS`; a new one (render, plot, export,
+validate) is a :class:`Command` added with :func:`register`. Bad input (scene errors,
+bad options, unusable backends, unwritable files) ends with exit code 2 and one line
+``corpuscle: error: ...`` on stderr, never a traceback. Scenes are loaded and validated
+before the compiled core is imported, so those errors need no build.
+
+Exit codes: 0 success, 2 bad input, 3 run stopped by a health check, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import importlib
+import json
+import math
+import os
+import pathlib
+import platform
+import re
+import shlex
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+from .scene import SCHEMAS, KINDS, SceneError, builtin_scenes, load_scene, parse_set
+
+PROG = "corpuscle"
+BACKENDS = ("serial", "cpu", "cuda")
+EXIT_OK, EXIT_USAGE, EXIT_STOPPED, EXIT_INTERRUPTED = 0, 2, 3, 130
+
+
+class UsageError(ValueError):
+    """Bad command-line input found after argparse (one-line message)."""
+
+
+@dataclass
+class Command:
+    """One subcommand: its name, one-line help, argument setup and handler.
+
+    ``configure(parser)`` adds the arguments; ``handler(args)`` returns the exit code.
+    """
+
+    name: str
+    help: str
+    configure: Callable[[argparse.ArgumentParser], None]
+    handler: Callable[[argparse.Namespace], int]
+    description: str | None = None
+
+
+# every subcommand, in the order --help lists them
+COMMANDS: dict[str, Command] = {}
+
+
+def register(command: Command) -> Command:
+    """Add a subcommand to the table (later registrations replace earlier ones)."""
+    COMMANDS[command.name] = command
+    return command
+
+
+# ---------------------------------------------------------------------------
+# small helpers
+# ---------------------------------------------------------------------------
+
+
+def _one_line(text: object) -> str:
+    """Collapse a message onto one line."""
+    return " ".join(str(text).split()) or "unknown error"
+
+
+def _err(message: str) -> None:
+    print(f"{PROG}: {message}", file=sys.stderr)
+
+
+def _int_option(name: str, text: str | None, minimum: int | None = None) -> int | None:
+    """Parse an integer option ourselves so a bad one gives a one-line error."""
+    if text is None:
+        return None
+    try:
+        value = int(text.strip())
+    except ValueError:
+        raise UsageError(f"{name} must be an integer, got {text!r}") from None
+    if minimum is not None and value < minimum:
+        what = "a positive integer" if minimum == 1 else f"an integer >= {minimum}"
+        raise UsageError(f"{name} must be {what}, got {value}")
+    return value
+
+
+def _float_option(name: str, text: str | None) -> float | None:
+    if text is None:
+        return None
+    try:
+        value = float(text.strip())
+    except ValueError:
+        raise UsageError(f"{name} must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise UsageError(f"{name} must be a finite number, got {text!r}")
+    return value
+
+
+def _overrides(args: argparse.Namespace, options: dict[str, str]) -> dict[str, object]:
+    """Scene overrides from ``--set`` (applied first) and dedicated options (which win)."""
+    out: dict[str, object] = {}
+    for expr in getattr(args, "set", None) or []:
+        key, value = parse_set(expr)
+        out[key] = value
+    for attr, key in options.items():
+        value = getattr(args, attr, None)
+        if value is not None:
+            out[key] = value
+    return out
+
+
+def _safe_filename(name: str) -> str:
+    """A scene name made safe to use as a file name."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "run"
+
+
+def _import_core_module(module: str):
+    """Import a module that needs the compiled core, as a one-line error if missing."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise UsageError(
+            f"the compiled core is not available ({_one_line(exc)}); build it with `pip install .`"
+        ) from None
+
+
+def _progress_enabled(args: argparse.Namespace) -> bool:
+    """A progress bar only on a terminal, and never with --no-progress or --json."""
+    if getattr(args, "no_progress", False) or getattr(args, "json", None):
+        return False
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def _fmt_rate(x: float) -> str:
+    """Rates: plain below a million, scientific above."""
+    if not math.isfinite(x):
+        return "inf"
+    return f"{x:,.1f}" if x < 1e6 else f"{x:.3e}"
+
+
+def _now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
+
+
+def _command_line(args: argparse.Namespace) -> str:
+    return shlex.join([PROG, *getattr(args, "_argv", [])])
+
+
+def _build_info() -> dict[str, Any] | None:
+    """``_core.build_info()``, or None when the core is not built."""
+    try:
+        core = importlib.import_module("corpuscle._core")
+    except ImportError:
+        return None
+    return dict(core.build_info())
+
+
+def _cpu_name() -> str:
+    """The CPU model, from /proc/cpuinfo where there is one."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+def _device_name(backend: str, info: dict[str, Any] | None) -> str:
+    """A human-readable device for benchmark records."""
+    if backend == "cuda" and info and info.get("gpus"):
+        gpu = info["gpus"][0]
+        return f"{gpu.get('name', 'GPU')} (compute {gpu.get('compute_capability', '?')})"
+    cpu = f"{_cpu_name()}, {os.cpu_count() or '?'} logical cores"
+    if backend == "cpu" and info:
+        return f"{cpu}, {info.get('omp_threads', '?')} OpenMP threads"
+    return cpu
+
+
+# ---------------------------------------------------------------------------
+# corpuscle scenes
+# ---------------------------------------------------------------------------
+
+
+def _configure_scenes(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--keys", action="store_true", help="also list every key of each scene kind (type, default, unit, range)")
+
+
+def _cmd_scenes(args: argparse.Namespace) -> int:
+    # built-in scenes, one a line
+    scenes = builtin_scenes()
+    width = max((len(n) for n, _ in scenes), default=4)
+    for name, description in scenes:
+        print(f"{name:<{width}}  {description}")
+    if not args.keys:
+        return EXIT_OK
+    # the schema of every kind, for --set
+    for kind_name, keys in SCHEMAS.items():
+        kind = KINDS[kind_name]
+        print(f"\nkind {kind_name}: {kind.description}")
+        kw = max(len(k) for k in keys)
+        for key, spec in keys.items():
+            default = json.dumps(spec.default, ensure_ascii=False)
+            rng = spec.interval()
+            unit = spec.unit
+            print(f"  {key:<{kw}}  {spec.type:<9} {default:<22} {unit:<7} {rng:<20} {spec.doc}")
+        for array, specs in kind.arrays.items():
+            print(f"  [[{array}]] (repeatable; `--set {array}=[{{...}}, ...]` replaces them all)")
+            for key, spec in specs.items():
+                default = json.dumps(spec.default, ensure_ascii=False)
+                print(f"    {key:<{kw - 2}}  {spec.type:<9} {default:<22} {spec.unit:<7} {spec.interval():<20} {spec.doc}")
+    return EXIT_OK
+
+
+register(Command("scenes", "list the built-in scenes", _configure_scenes, _cmd_scenes))
+
+
+# ---------------------------------------------------------------------------
+# corpuscle info
+# ---------------------------------------------------------------------------
+
+
+def _configure_info(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from . import __version__
+
+    # the compiled core may be missing on a source checkout
+    try:
+        core = importlib.import_module("corpuscle._core")
+    except ImportError as exc:
+        _err(f"error: the compiled core is not available ({_one_line(exc)}); build it with `pip install .`")
+        return EXIT_USAGE
+    info = dict(core.build_info())
+    if args.json:
+        print(json.dumps({"version": __version__, "build_info": info}, default=str))
+        return EXIT_OK
+    # text report
+    print(f"corpuscle {__version__}")
+    print(f"  core version       {info.get('version')}")
+    if info.get("cuda_compiled"):
+        print(f"  CUDA               compiled (architectures: {info.get('cuda_architectures') or '?'})")
+    else:
+        print("  CUDA               not compiled (CPU-only build)")
+    omp = f"yes, {info.get('omp_threads')} threads" if info.get("openmp") else "no"
+    print(f"  OpenMP             {omp}")
+    gpus = info.get("gpus") or []
+    for i, gpu in enumerate(gpus):
+        mem = gpu.get("memory_gib")
+        mem_text = f", {mem:.1f} GiB" if isinstance(mem, (int, float)) else ""
+        print(f"  GPU {i}              {gpu.get('name')} (compute {gpu.get('compute_capability')}{mem_text})")
+    if info.get("gpu_error"):
+        print(f"  GPU                none usable: {_one_line(info['gpu_error'])}")
+    elif not gpus:
+        print("  GPU                none")
+    return EXIT_OK
+
+
+register(Command("info", "show the version, build options and usable GPUs", _configure_info, _cmd_info))
+
+
+# ---------------------------------------------------------------------------
+# corpuscle run
+# ---------------------------------------------------------------------------
+
+RUN_OPTIONS = {"particles": "fluid.particles", "seed": "run.seed", "time": "run.end_time", "every": "run.record_every"}
+
+
+def _configure_run(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", metavar="SCENE|FILE.toml", help="a built-in scene name (see `corpuscle scenes`) or a scene file")
+    p.add_argument("--backend", choices=("auto", *BACKENDS), default="auto", help="compute backend (default: auto)")
+    stop = p.add_mutually_exclusive_group()
+    stop.add_argument("--steps", metavar="N", help="stop after N steps (or at run.end_time, whichever comes first)")
+    stop.add_argument("--time", metavar="T", help="simulated end time in seconds (sets run.end_time)")
+    p.add_argument("--particles", metavar="N", help="number of fluid particles (sets fluid.particles)")
+    p.add_argument("--seed", metavar="S", help="random seed (sets run.seed)")
+    p.add_argument(
+        "--set", metavar="KEY=VALUE", action="append", default=[],
+        help="override any scene key, value in TOML syntax (repeatable), e.g. --set fluid.stiffness=2e4",
+    )
+    p.add_argument("--out", metavar="FILE.cps", help="output frame stream (default: <scene name>.cps here)")
+    p.add_argument("--every", metavar="K", help="record a frame every K steps (sets run.record_every)")
+    p.add_argument("--ghosts", action="store_true", help="also record the wall ghost particles")
+    p.add_argument("--velocity", action="store_true", help="also record particle velocities")
+    p.add_argument("--json", action="store_true", help="print only one JSON summary object on stdout")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _run_prepare(args: argparse.Namespace):
+    """Parse options and load the scene: everything that can fail without the core."""
+    steps = _int_option("--steps", args.steps, minimum=1)
+    args.particles = _int_option("--particles", args.particles)
+    args.seed = _int_option("--seed", args.seed)
+    args.time = _float_option("--time", args.time)
+    args.every = _int_option("--every", args.every, minimum=1)
+    scene = load_scene(args.scene, _overrides(args, RUN_OPTIONS))
+    # the output folder must exist before any expensive work
+    out = pathlib.Path(args.out) if args.out else pathlib.Path(f"{_safe_filename(scene.name)}.cps")
+    parent = out.parent if str(out.parent) else pathlib.Path(".")
+    if not parent.is_dir():
+        raise UsageError(f"--out {out}: folder {parent} does not exist")
+    if out.is_dir():
+        raise UsageError(f"--out {out}: is a folder")
+    return scene, steps, out
+
+
+class _Progress:
+    """A tqdm bar on stderr (steps when a step budget is set, else simulated seconds)."""
+
+    def __init__(self, enabled: bool, budget: int | None, end_time: float) -> None:
+        self.bar = None
+        self.budget = budget
+        if not enabled:
+            return
+        from tqdm import tqdm  # lazily: only runs with a terminal need it
+
+        if budget is not None:
+            self.bar = tqdm(total=budget, unit="step", file=sys.stderr, dynamic_ncols=True, leave=False)
+        else:
+            self.bar = tqdm(
+                total=end_time, unit="s", file=sys.stderr, dynamic_ncols=True, leave=False,
+                bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s simulated [{elapsed}<{remaining}{postfix}]",
+            )
+
+    def update(self, steps_done: int, sim_time: float, wall: float) -> None:
+        if self.bar is None:
+            return
+        if self.budget is not None:
+            self.bar.update(steps_done - self.bar.n)
+        else:
+            self.bar.update(min(sim_time, self.bar.total) - self.bar.n)
+            rate = steps_done / wall if wall > 0 else 0.0
+            self.bar.set_postfix_str(f"{rate:,.0f} steps/s", refresh=False)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _run_header(scene, sim, backend: str, every: int, args: argparse.Namespace) -> dict[str, Any]:
+    """The frame-stream header: what was run, how, by which build."""
+    from . import __version__
+
+    return {
+        "program": PROG,
+        "version": __version__,
+        "command": _command_line(args),
+        "created": _now_iso(),
+        "scene": scene.to_dict(),
+        "scene_path": str(scene.path) if scene.path else None,
+        "backend": backend,
+        "particles": int(sim.n_particles),
+        "ghosts_recorded": bool(args.ghosts),
+        "velocity_recorded": bool(args.velocity),
+        "record_every": every,
+        "host": platform.node(),
+    }
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    # validate everything cheap first; the core is imported only after this
+    scene, budget, out = _run_prepare(args)
+    every = int(scene["run.record_every"])
+    simulation = _import_core_module("corpuscle.simulation")
+    io = importlib.import_module("corpuscle.io")
+
+    # initialisation (not timed)
+    sim = simulation.Simulation.from_scene(scene, backend=args.backend)
+    backend = str(getattr(sim, "backend", args.backend))
+    header = _run_header(scene, sim, backend, every, args)
+    try:
+        writer = io.FrameWriter(out, header)
+    except OSError as exc:
+        raise UsageError(f"cannot write {out}: {exc.strerror or _one_line(exc)}") from None
+
+    frames = 0
+    stopped: str | None = None
+    interrupted = False
+    start_steps = int(sim.steps)
+    progress = _Progress(_progress_enabled(args), budget, float(sim.end_time))
+    with writer:
+        # the first frame, then the clock starts
+        writer.write_frame(sim.steps, sim.time, sim.dt, **sim.frame(ghosts=args.ghosts, velocity=args.velocity))
+        frames += 1
+        t0 = time.perf_counter()
+        try:
+            # advance in chunks of K steps, recording and checking health after each
+            while sim.time < sim.end_time:
+                done = int(sim.steps) - start_steps
+                if budget is not None and done >= budget:
+                    break
+                k = every if budget is None else min(every, budget - done)
+                before = int(sim.steps)
+                sim.step(k)
+                if int(sim.steps) <= before:
+                    raise RuntimeError(f"Simulation.step({k}) did not advance (still at step {before})")
+                writer.write_frame(
+                    sim.steps, sim.time, sim.dt, **sim.frame(ghosts=args.ghosts, velocity=args.velocity)
+                )
+                frames += 1
+                progress.update(int(sim.steps) - start_steps, float(sim.time), time.perf_counter() - t0)
+                message = sim.check_health()
+                if message:
+                    stopped = _one_line(message)
+                    break
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            wall = time.perf_counter() - t0
+            progress.close()
+    # the writer is closed here, so every recorded frame is readable
+
+    steps = int(sim.steps) - start_steps
+    if interrupted:
+        _err(f"run interrupted at step {sim.steps}; {frames} frames kept in {out}")
+        return EXIT_INTERRUPTED
+    result = None if stopped else dict(sim.result() or {})
+    n = int(sim.n_particles)
+    ghosts = getattr(sim, "n_ghosts", None)
+    sps = steps / wall if wall > 0 else float("inf")
+    summary = {
+        "scene": scene.name,
+        "backend": backend,
+        "particles": n,
+        "ghosts": None if ghosts is None else int(ghosts),
+        "steps": steps,
+        "sim_time": float(sim.time),
+        "wall_time": wall,
+        "steps_per_second": sps,
+        "particle_steps_per_second": sps * n,
+        "frames": frames,
+        "out": str(out),
+        "result": result,
+        "stopped": stopped,
+    }
+    if args.json:
+        print(json.dumps(summary, default=_json_default))
+    else:
+        _print_run_summary(summary, scene)
+    if stopped:
+        _err(f"run stopped at step {sim.steps}: {stopped}")
+        return EXIT_STOPPED
+    return EXIT_OK
+
+
+def _json_default(obj: Any) -> Any:
+    """Make NumPy scalars and arrays JSON-serialisable."""
+    for attr in ("tolist", "item"):
+        if hasattr(obj, attr):
+            return getattr(obj, attr)()
+    return str(obj)
+
+
+def _print_run_summary(s: dict[str, Any], scene) -> None:
+    """The human-readable run summary."""
+    where = f" ({scene.path})" if scene.path and not scene.builtin else ""
+    rows = [
+        ("scene", f"{s['scene']}{where}"),
+        ("backend", s["backend"]),
+        ("particles", f"{s['particles']:,}"),
+    ]
+    if s["ghosts"] is not None:
+        rows.append(("ghosts", f"{s['ghosts']:,}"))
+    rows += [
+        ("steps", f"{s['steps']:,}"),
+        ("simulated time", f"{s['sim_time']:.4g} s"),
+        ("wall time", f"{s['wall_time']:.3f} s"),
+        ("steps/s", _fmt_rate(s["steps_per_second"])),
+        ("particle-steps/s", _fmt_rate(s["particle_steps_per_second"])),
+        ("output", f"{s['out']} ({s['frames']} frames)"),
+    ]
+    width = max(len(k) for k, _ in rows)
+    for key, value in rows:
+        print(f"{key:<{width}}  {value}")
+    result = s["result"] or {}
+    # the scene's answer, then anything else it reports
+    if "answer" in result:
+        face = result.get("answer_face")
+        print(f"8-ball says: {result['answer']}" + (f" (face {face})" if face is not None else ""))
+    for key, value in result.items():
+        if key not in ("answer", "answer_face"):
+            print(f"{key:<{width}}  {value}")
+
+
+register(Command("run", "run a scene and record it to a frame stream", _configure_run, _cmd_run))
+
+
+# ---------------------------------------------------------------------------
+# corpuscle bench
+# ---------------------------------------------------------------------------
+
+
+def _configure_bench(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", metavar="SCENE|FILE.toml", help="a built-in scene name or a scene file")
+    p.add_argument("--backend", nargs="+", choices=BACKENDS, metavar="B",
+                   help="backends to time: serial, cpu, cuda (default: every usable one)")
+    p.add_argument("--particles", metavar="N", help="number of fluid particles (sets fluid.particles)")
+    p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override any scene key (repeatable)")
+    p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
+    p.add_argument("--repeats", metavar="R", default="5", help="timed repeats; the median is reported (default: 5)")
+    p.add_argument("--warmup", metavar="W", default="20", help="untimed warm-up steps (default: 20)")
+    p.add_argument("--json", metavar="FILE", help="also write the results as a JSON list of rows to FILE")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    # options and scene first; the core only after
+    steps = _int_option("--steps", args.steps, minimum=1)
+    repeats = _int_option("--repeats", args.repeats, minimum=1)
+    warmup = _int_option("--warmup", args.warmup, minimum=0)
+    args.particles = _int_option("--particles", args.particles)
+    scene = load_scene(args.scene, _overrides(args, {"particles": "fluid.particles"}))
+    if args.json:
+        parent = pathlib.Path(args.json).parent
+        if not parent.is_dir():
+            raise UsageError(f"--json {args.json}: folder {parent} does not exist")
+    simulation = _import_core_module("corpuscle.simulation")
+    Simulation = simulation.Simulation
+    backends = list(dict.fromkeys(args.backend)) if args.backend else [
+        b for b in BACKENDS if b != "cuda" or Simulation.cuda_available()
+    ]
+    info = _build_info()
+    date = _now_iso()
+
+    # progress over backends x repeats (stderr, terminals only)
+    bar = None
+    if _progress_enabled(argparse.Namespace(no_progress=args.no_progress)):
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(backends) * repeats, unit="repeat", file=sys.stderr, leave=False)
+    rows: list[dict[str, Any]] = []
+    try:
+        for backend in backends:
+            if bar is not None:
+                bar.set_description(backend)
+            sim = Simulation.from_scene(scene, backend=backend)
+            if warmup:
+                sim.step(warmup)
+            times = []
+            for _ in range(repeats):
+                times.append(float(sim.bench_steps(steps)))
+                if bar is not None:
+                    bar.update(1)
+            median = statistics.median(times)
+            n = int(sim.n_particles)
+            sps = steps / median if median > 0 else float("inf")
+            row: dict[str, Any] = {
+                "scene": scene.name,
+                "backend": backend,
+                "particles": n,
+                "steps": steps,
+                "repeats": repeats,
+                "warmup": warmup,
+                "steps_per_second": sps,
+                "particle_steps_per_second": sps * n,
+                "seconds": times,
+                "device": _device_name(backend, info),
+                "date": date,
+                "command": _command_line(args),
+            }
+            if backend == "cuda":
+                row["stages"] = {str(k): float(v) for k, v in dict(sim.stage_times(steps)).items()}
+            rows.append(row)
+            del sim
+    finally:
+        if bar is not None:
+            bar.close()
+
+    _print_bench(rows)
+    if args.json:
+        try:
+            with open(args.json, "w", encoding="utf-8") as f:
+                json.dump(rows, f, indent=2, default=_json_default)
+                f.write("\n")
+        except OSError as exc:
+            raise UsageError(f"cannot write {args.json}: {exc.strerror or _one_line(exc)}") from None
+    return EXIT_OK
+
+
+def _print_bench(rows: list[dict[str, Any]]) -> None:
+    """The benchmark table, then the per-stage table of each backend that has one."""
+    serial = next((r for r in rows if r["backend"] == "serial"), None)
+    head = f"{'backend':<8} {'particles':>10} {'steps/s':>12} {'particle-steps/s':>18}"
+    print(head + (f" {'speedup':>9}" if serial else ""))
+    for r in rows:
+        line = (f"{r['backend']:<8} {r['particles']:>10,} {_fmt_rate(r['steps_per_second']):>12} "
+                f"{_fmt_rate(r['particle_steps_per_second']):>18}")
+        if serial:
+            line += f" {r['steps_per_second'] / serial['steps_per_second']:>8.1f}x"
+        print(line)
+    for r in rows:
+        stages = r.get("stages")
+        if not stages:
+            continue
+        total = sum(stages.values())
+        print(f"\n{r['backend']} stages (ms per step, {r['device']})")
+        width = max(len(k) for k in stages)
+        for name, ms in stages.items():
+            share = 100.0 * ms / total if total > 0 else 0.0
+            print(f"  {name:<{width}}  {ms:9.4f}  {share:5.1f}%")
+        print(f"  {'total':<{width}}  {total:9.4f}")
+
+
+register(Command("bench", "time steps per second on each backend", _configure_bench, _cmd_bench))
+
+
+# ---------------------------------------------------------------------------
+# entry point
+# ---------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered subcommand."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="corpuscle: GPU particle simulator (SPH fluids, DEM, rigid bodies)"
+    )
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for cmd in COMMANDS.values():
+        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description or cmd.help)
+        cmd.configure(p)
+        p.set_defaults(_handler=cmd.handler)
+    return parser
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions reported as one-line input errors (only from modules already loaded,
+    so this never imports the core)."""
+    errors: list[type[BaseException]] = [SceneError, UsageError, ValueError]
+    for module, name in (("corpuscle.io", "FrameStreamError"), ("corpuscle.simulation", "BackendError")):
+        cls = getattr(sys.modules.get(module), name, None)
+        if isinstance(cls, type) and issubclass(cls, BaseException):
+            errors.append(cls)
+    return tuple(errors)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)  # usage errors exit 2 here
+    args._argv = argv
+    try:
+        return int(args._handler(args) or 0)
+    except Exception as exc:
+        # bad input: one line, exit 2; CORPUSCLE_DEBUG=1 shows the traceback
+        if not isinstance(exc, _user_errors()) or os.environ.get("CORPUSCLE_DEBUG"):
+            raise
+        _err(f"error: {_one_line(exc)}")
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

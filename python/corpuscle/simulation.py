@@ -1,0 +1,345 @@
+"""`corpuscle.Simulation`: a scene on one backend, stepped from Python.
+
+The compiled core holds the whole state (on the GPU for the CUDA backend); this module turns a
+validated scene into the core's parameters and initial state, and reads results back.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Simulation", "BackendError", "UnstableRunError", "BACKENDS"]
+
+BACKENDS = ("auto", "serial", "cpu", "cuda")
+
+# die faces: number -> outward normal in the body frame (opposite faces sum to 7)
+DIE_FACES = {1: (1, 0, 0), 6: (-1, 0, 0), 2: (0, 1, 0), 5: (0, -1, 0), 3: (0, 0, 1), 4: (0, 0, -1)}
+
+
+class BackendError(ValueError):
+    """A backend was asked for that this build or machine cannot run."""
+
+
+class UnstableRunError(RuntimeError):
+    """The run went unstable (non-finite state); `step` names where."""
+
+    def __init__(self, step: int, message: str):
+        super().__init__(message)
+        self.step = step
+
+
+def _core():
+    from . import _core as core  # the compiled extension
+    return core
+
+
+def cuda_status() -> tuple[bool, str]:
+    """(usable, reason): whether the CUDA backend can run here, and why not."""
+    info = _core().build_info()
+    if not info["cuda_compiled"]:
+        return False, "this build has no CUDA backend"
+    if not info["gpus"]:
+        return False, info.get("gpu_error") or "no CUDA device found"
+    return True, ""
+
+
+def resolve_backend(name: str) -> str:
+    """Map 'auto' to cuda when a GPU is usable, else cpu; reject unusable choices."""
+    if name not in BACKENDS:
+        raise BackendError(f"--backend must be one of {', '.join(BACKENDS)}, got {name!r}")
+    ok, why = cuda_status()
+    if name == "auto":
+        return "cuda" if ok else "cpu"
+    if name == "cuda" and not ok:
+        raise BackendError(f"--backend cuda: no usable GPU ({why})")
+    return name
+
+
+def _random_quaternion(rng: np.random.Generator) -> np.ndarray:
+    # uniform on SO(3) (Shoemake 1992)
+    u1, u2, u3 = rng.random(3)
+    a, b = math.sqrt(1 - u1), math.sqrt(u1)
+    return np.array([b * math.cos(2 * math.pi * u3), a * math.sin(2 * math.pi * u2),
+                     a * math.cos(2 * math.pi * u2), b * math.sin(2 * math.pi * u3)], dtype=np.float32)
+
+
+class Simulation:
+    """A scene running on one backend.
+
+    Build with :meth:`from_scene`; advance with :meth:`step` or :meth:`run`; read particle
+    arrays with :meth:`field` (zero-copy: NumPy on the CPU, DLPack on CUDA) and rigid poses
+    with :meth:`rigid_poses`; push shaking input with :meth:`set_control`.
+    """
+
+    def __init__(self, scene, backend: str = "auto"):
+        self.scene = scene
+        self.backend = resolve_backend(backend)
+        if scene.kind != "magic8ball":
+            raise BackendError(f"scene kind {scene.kind!r} is not supported by this version")
+        self._build_magic8ball()
+
+    # construction ---------------------------------------------------------------------
+    @classmethod
+    def from_scene(cls, scene, backend: str = "auto", overrides: dict[str, Any] | None = None,
+                   **kwargs) -> "Simulation":
+        """Load a scene (built-in name, TOML path or Scene) with overrides and build it.
+
+        Overrides are dotted keys (``{"fluid.stiffness": 2e4}``) or keyword arguments with
+        ``__`` for the dot (``fluid__stiffness=2e4``); ``particles``, ``seed`` and
+        ``end_time`` are shorthands for ``fluid.particles``, ``run.seed`` and ``run.end_time``.
+        """
+        from .scene import Scene, load_scene
+
+        aliases = {"particles": "fluid.particles", "seed": "run.seed", "end_time": "run.end_time"}
+        ovr = dict(overrides or {})
+        for k, v in kwargs.items():
+            ovr[aliases.get(k, k.replace("__", "."))] = v
+        if isinstance(scene, Scene):
+            scene = scene.with_overrides(ovr) if ovr else scene
+        else:
+            scene = load_scene(scene, ovr)
+        return cls(scene, backend)
+
+    @staticmethod
+    def cuda_available() -> bool:
+        """Whether the CUDA backend is compiled and a device is usable."""
+        return cuda_status()[0]
+
+    def _build_magic8ball(self) -> None:
+        v = self.scene.values
+        n = int(v["fluid.particles"])
+        radius = float(v["container.radius"])
+        h = float(v["sph.h"])
+        if v["sph.scale_h"]:
+            h *= (float(v["sph.reference_particles"]) / n) ** (1.0 / 3.0)
+        side = float(v["die.side"])
+        half = side / 2
+        die_mass = float(v["die.density"]) * side ** 3
+        rest = float(v["fluid.rest_density"])
+        seed = int(v["run.seed"])
+        rng = np.random.default_rng(seed)
+        die_q = _random_quaternion(rng)
+        die_pos = np.asarray(v["die.position"], dtype=np.float32)
+        margin = float(v["die.contact_margin"]) * h
+        # fluid fills the sphere outside the die's contact margin
+        pos, spacing = _core().poisson_disk_sphere(radius, n, die_pos.tolist(), [half] * 3, die_q.tolist(),
+                                                   margin, seed)
+        fluid_volume = 4.0 / 3.0 * math.pi * radius ** 3 - side ** 3
+        self.h = h
+        self.spacing = float(spacing)
+        self.mass = rest * fluid_volume / n
+        params = {
+            "n_fluid": n, "h": h, "mass": self.mass, "rest_density": rest,
+            "stiffness": v["fluid.stiffness"], "gamma": v["fluid.gamma"], "viscosity": v["fluid.viscosity"],
+            "xsph": v["fluid.xsph"], "density_floor": v["fluid.density_floor"] * rest,
+            "radius": radius, "wall_restitution": v["container.restitution"],
+            "wall_friction": v["container.friction"], "shell_inertia": v["container.shell_inertia"],
+            "spin_damping": v["container.spin_damping"], "gravity": list(v["gravity.g"]),
+            "die_half": [half] * 3, "die_mass": die_mass, "die_inertia": [die_mass * side ** 2 / 6.0] * 3,
+            "contact_margin": margin, "contact_stiffness": v["die.contact_stiffness"],
+            "contact_drag": v["die.drag"], "die_restitution": v["die.restitution"],
+            "die_linear_damping": v["die.linear_damping"], "die_angular_damping": v["die.angular_damping"],
+            "dt_min": v["timestep.dt_min"], "dt_max": v["timestep.dt_max"],
+            "cfl_advective": v["timestep.cfl_advective"], "cfl_acoustic": v["timestep.cfl_acoustic"],
+            "cfl_force": v["timestep.cfl_force"], "cfl_viscous": v["timestep.cfl_viscous"],
+            "shakes": [dict(start=s["start"], end=s["end"], acceleration=list(s["acceleration"]),
+                            torque=list(s["torque"])) for s in self.scene.shakes],
+        }
+        self.params = params
+        die = {"position": die_pos.tolist(), "velocity": [0.0] * 3, "orientation": die_q.tolist(),
+               "angular_velocity": [0.0] * 3}
+        vel = np.zeros_like(pos)
+        self._sim = _core().Magic8Ball(self.backend, params, np.ascontiguousarray(pos), vel, die)
+        self.end_time = float(v["run.end_time"])
+        self.answers = list(v["die.answers"])
+
+    # stepping -------------------------------------------------------------------------
+    def step(self, n: int = 1) -> None:
+        """Advance n steps (steps after a run's end time, set by :meth:`run`, are no-ops)."""
+        if n < 0:
+            raise ValueError(f"steps must be >= 0, got {n}")
+        self._sim.step(int(n))
+
+    def run(self, until: float | None = None, steps: int | None = None, chunk: int = 100,
+            callback=None) -> None:
+        """Run to simulated time `until` (exactly: the last dt is shortened) or for `steps` steps.
+
+        `callback(sim)` is called after every `chunk` steps; it may return True to stop.
+        """
+        if until is not None:
+            self._sim.set_end_time(float(until))
+        budget = steps if steps is not None else (None if until is not None else 0)
+        while True:
+            k = chunk if budget is None else min(chunk, budget)
+            if k <= 0:
+                break
+            self._sim.step(k)
+            if budget is not None:
+                budget -= k
+            st = self._sim.state()
+            if st["bad"]:
+                raise UnstableRunError(st["bad_step"], self.check_health() or "unstable")
+            if callback is not None and callback(self):
+                break
+            if st["done"]:
+                break
+
+    def set_end_time(self, t: float) -> None:
+        """Steps that would pass simulated time t are shortened, then become no-ops."""
+        self._sim.set_end_time(float(t))
+
+    def set_control(self, acceleration=(0.0, 0.0, 0.0), torque=(0.0, 0.0, 0.0)) -> None:
+        """Container linear acceleration (m/s²) and shell torque (N·m) for the next steps,
+        added to the scene's shake schedule; every backend applies it identically."""
+        self._sim.set_control([float(x) for x in acceleration], [float(x) for x in torque])
+
+    def evaluate(self) -> dict:
+        """Compute densities, pressures, accelerations and this state's reductions without
+        advancing; returns :meth:`state` (its ``chosen_dt`` is the dt a step would take)."""
+        self._sim.evaluate()
+        return self._sim.state()
+
+    def set_particles(self, positions, velocities=None) -> None:
+        """Replace the fluid state ((n, 3) arrays, n = n_particles); ids restart at 0..n-1."""
+        pos = np.ascontiguousarray(positions, dtype=np.float32)
+        vel = np.zeros_like(pos) if velocities is None else np.ascontiguousarray(velocities, dtype=np.float32)
+        self._sim.set_particles(pos, vel)
+
+    def set_die(self, position=None, orientation=None, velocity=None, angular_velocity=None) -> None:
+        """Set the die's pose (orientation as w, x, y, z) and velocities (container frame)."""
+        die = self._sim.state()["die"]
+        for key, val in (("position", position), ("orientation", orientation), ("velocity", velocity),
+                         ("angular_velocity", angular_velocity)):
+            if val is not None:
+                die[key] = [float(x) for x in val]
+        self._sim.set_die(die)
+
+    # state ----------------------------------------------------------------------------
+    def state(self) -> dict:
+        """Scalars of the current state (time, dt, die pose, last step's reductions)."""
+        return self._sim.state()
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s)."""
+        return self._sim.state()["time"]
+
+    @property
+    def dt(self) -> float:
+        """The last step's dt (s)."""
+        return self._sim.state()["dt"]
+
+    @property
+    def steps(self) -> int:
+        """Steps taken."""
+        return self._sim.state()["step"]
+
+    @property
+    def n_particles(self) -> int:
+        """Fluid particles placed."""
+        return self._sim.n_fluid
+
+    @property
+    def n_ghosts(self) -> int:
+        """Ghost particles of the last step."""
+        return self._sim.state()["n_ghost"]
+
+    def field(self, name: str, copy: bool = False):
+        """A particle field: position, velocity, density, pressure, id, acceleration,
+        ghost_position, ghost_velocity. Without copy: a zero-copy view (NumPy on the CPU; on
+        CUDA an array exposing ``__dlpack__`` for CuPy/PyTorch), valid until the next step.
+        Particles are reordered every step; ``id`` gives each one's persistent index."""
+        return self._sim.download(name) if copy else self._sim.view(name)
+
+    @property
+    def positions(self):
+        return self.field("position")
+
+    @property
+    def velocities(self):
+        return self.field("velocity")
+
+    @property
+    def density(self):
+        return self.field("density")
+
+    @property
+    def pressure(self):
+        return self.field("pressure")
+
+    def rigid_poses(self) -> dict[str, dict[str, np.ndarray]]:
+        """Rigid bodies: name -> position, orientation (w, x, y, z), velocity, angular_velocity."""
+        die = self._sim.state()["die"]
+        return {"die": {k: np.asarray(v, dtype=np.float32) for k, v in die.items()}}
+
+    def diagnostics(self) -> dict[str, float]:
+        """Scalars recorded with every frame."""
+        st = self._sim.state()
+        die = st["die"]
+        return {
+            "dt": st["dt"], "kinetic_energy": st["kinetic_energy"], "density_error": st["density_error"],
+            "mean_density": st["mean_density"], "die_height": die["position"][2],
+            "die_speed": float(np.linalg.norm(die["velocity"])), "n_particles": float(self.n_particles),
+            "n_ghosts": float(st["n_ghost"]), "die_contacts": float(st["die_contacts"]),
+        }
+
+    def frame(self, ghosts: bool = False, velocity: bool = False) -> dict:
+        """Keyword arguments for `FrameWriter.write_frame` (host copies of the fields)."""
+        fields = {"position": self._sim.download("position"), "density": self._sim.download("density"),
+                  "pressure": self._sim.download("pressure")}
+        groups = {k: "fluid" for k in fields}
+        if velocity:
+            fields["velocity"] = self._sim.download("velocity")
+            groups["velocity"] = "fluid"
+        if ghosts:
+            fields["ghost_position"] = self._sim.download("ghost_position")
+            groups["ghost_position"] = "ghost"
+        rigid = {name: {"position": p["position"], "orientation": p["orientation"]}
+                 for name, p in self.rigid_poses().items()}
+        return {"fields": fields, "groups": groups, "rigid": rigid, "diagnostics": self.diagnostics()}
+
+    def header(self) -> dict:
+        """The run header recorded at the start of a frame stream."""
+        from . import __version__
+        r = float(self.params["radius"])
+        half = self.params["die_half"]
+        return {
+            "scene": self.scene.name, "kind": self.scene.kind, "dim": 3, "backend": self.backend,
+            "corpuscle_version": __version__, "parameters": self.scene.to_dict(),
+            "container": {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": r},
+            "bodies": [{"name": "die", "shape": "box", "half_extents": list(half),
+                        "faces": {str(k): list(v) for k, v in DIE_FACES.items()},
+                        "answers": self.answers}],
+            "particles": self.n_particles, "h": self.h, "particle_radius": self.spacing / 2,
+            "mass": self.mass, "window": [0.0, 0.0, 1.0],
+        }
+
+    def result(self) -> dict:
+        """The scene's result: for magic8ball the face toward the window (+z) and its answer."""
+        st = self._sim.state()
+        face = int(st["answer_face"])
+        return {"answer_face": face, "answer": self.answers[face - 1],
+                "die_position": list(st["die"]["position"]), "die_orientation": list(st["die"]["orientation"])}
+
+    def check_health(self) -> str | None:
+        """None while the run is sound, else a message naming the step where it went bad."""
+        st = self._sim.state()
+        if st["bad"]:
+            return f"non-finite particle state (NaN/inf) at step {st['bad_step']}"
+        die = np.asarray(st["die"]["position"] + st["die"]["velocity"], dtype=np.float64)
+        if not np.all(np.isfinite(die)):
+            return f"non-finite die state at step {st['step']}"
+        return None
+
+    # measurement ----------------------------------------------------------------------
+    def bench_steps(self, n: int) -> float:
+        """Seconds for n steps, timed by the core (CUDA events on the GPU), init excluded."""
+        self._sim.set_end_time(math.inf)
+        return float(self._sim.bench(int(n)))
+
+    def stage_times(self, n: int) -> dict[str, float]:
+        """Milliseconds per step of each pipeline stage, averaged over n steps."""
+        self._sim.set_end_time(math.inf)
+        return dict(self._sim.profile(int(n)))
