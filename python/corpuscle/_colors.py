@@ -22,9 +22,9 @@ NAN_COLOR = (128, 128, 128)
 
 
 def make_lut(name: str, size: int = 256) -> np.ndarray:
-    """A (size, 3) uint8 table sampling ramp ``name`` at bin centres."""
+    """A (size, 3) uint8 table sampling ramp ``name`` evenly, both ends included."""
     stops = np.asarray(RAMPS[name], dtype=np.float64)
-    u = (np.arange(size) + 0.5) / size
+    u = np.linspace(0.0, 1.0, size)
     x = np.linspace(0.0, 1.0, len(stops))
     lut = np.stack([np.interp(u, x, stops[:, c]) for c in range(3)], axis=1)
     return np.ascontiguousarray(np.round(lut).astype(np.uint8))

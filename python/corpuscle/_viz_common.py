@@ -25,13 +25,13 @@ UNITS = {
     "dt": "s",
     "time": "s",
     "kinetic_energy": "J",
-    "density_error": "1",
+    "density_error": "-",
     "die_height": "m",
     "die_speed": "m/s",
     "lift": "N/m",
     "drag": "N/m",
-    "cl": "1",
-    "cd": "1",
+    "cl": "-",
+    "cd": "-",
     "n_particles": "count",
     "n_ghosts": "count",
 }
@@ -39,14 +39,15 @@ UNITS = {
 
 def units_of(name: str, header: dict | None = None) -> str:
     """Unit of a field or diagnostic; 2-D DEM "pressure" is a sum of contact forces (N/m)."""
-    if name == "pressure" and header and header.get("dim") == 2 and _is_dem(header):
+    if name == "pressure" and header and _is_dem(header):
         return "N/m"
     return UNITS.get(name, "")
 
 
 def _is_dem(header: dict) -> bool:
     """True for soft-sphere (DEM) scenes, whose "pressure" is a contact-force sum."""
-    text = " ".join(str(header.get(k, "")) for k in ("kind", "scene", "method")).lower()
+    kind = header.get("kind") or _find_key(header.get("parameters") or header.get("scene") or {}, "kind")
+    text = f"{kind} {scene_info(header)['name']}".lower()
     return any(w in text for w in ("dem", "wind", "tunnel", "gas", "granular"))
 
 
@@ -176,3 +177,70 @@ def run_stem(run: Any, default: str = "run") -> str:
         return Path(os.fspath(path)).name.split(".")[0] or default
     scene = getattr(run, "header", {}).get("scene")
     return re.sub(r"[^A-Za-z0-9_-]+", "_", str(scene)) if scene else default
+
+
+def _find_key(obj: Any, key: str) -> Any:
+    """First value stored under ``key`` anywhere in nested dicts (depth first)."""
+    if isinstance(obj, dict):
+        if key in obj:
+            return obj[key]
+        for v in obj.values():
+            found = _find_key(v, key)
+            if found is not None:
+                return found
+    return None
+
+
+def _vector3(value: Any) -> list[float] | None:
+    """A 3-vector from a list, or the first 3-vector inside a dict (``{"g": [0, 0, -9.81]}``)."""
+    if isinstance(value, dict):
+        for v in value.values():
+            if (vec := _vector3(v)) is not None:
+                return vec
+        return None
+    if isinstance(value, (list, tuple)) and len(value) == 3 and all(isinstance(x, (int, float)) for x in value):
+        return [float(x) for x in value]
+    return None
+
+
+# standard die: face number -> outward normal in the body frame (opposite faces sum to 7)
+DIE_FACES = {"1": [1, 0, 0], "6": [-1, 0, 0], "2": [0, 1, 0], "5": [0, -1, 0], "3": [0, 0, 1], "4": [0, 0, -1]}
+
+
+def scene_info(header: dict | None) -> dict:
+    """The scene geometry a run header describes, in the simulator's conventions.
+
+    Returns ``{"name", "dim", "container", "obstacles", "bodies", "particle_radius",
+    "gravity"}`` (missing ones None or empty). Headers written by ``Simulation.header()``
+    carry these directly; a header holding only the scene's parameters (``"scene"`` or
+    ``"parameters"`` as the nested scene dict) gets a sphere container from
+    ``container.radius`` and a die box from ``die.side``.
+    """
+    h = dict(header or {})
+    params = h.get("parameters") if isinstance(h.get("parameters"), dict) else None
+    if params is None and isinstance(h.get("scene"), dict):
+        params = h["scene"]
+    params = params or {}
+    # name: a string, or the scene table's name
+    name = h.get("scene") if isinstance(h.get("scene"), str) else None
+    if name is None:
+        meta = params.get("scene") if isinstance(params.get("scene"), dict) else {}
+        name = meta.get("name") or h.get("kind") or meta.get("kind") or ""
+    container = h.get("container") if isinstance(h.get("container"), dict) and "type" in h["container"] else None
+    if container is None and isinstance(params.get("container"), dict) and "radius" in params["container"]:
+        container = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": float(params["container"]["radius"])}
+    bodies = list(h.get("bodies") or [])
+    if not bodies and isinstance(params.get("die"), dict) and "side" in params["die"]:
+        half = 0.5 * float(params["die"]["side"])
+        bodies = [{"name": "die", "shape": "box", "half_extents": [half] * 3, "faces": DIE_FACES}]
+    radius = h.get("particle_radius")
+    return {
+        "name": str(name),
+        "dim": int(h["dim"]) if h.get("dim") else None,
+        "container": container,
+        "obstacles": list(h.get("obstacles") or []),
+        "bodies": bodies,
+        "particle_radius": float(radius) if radius else None,
+        "gravity": _vector3(_find_key(h, "gravity")),
+        "up": h.get("up"),
+    }

@@ -29,7 +29,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ._camera import quat_matrix
-from ._viz_common import open_run, parse_frames, prepare_dir, require
+from ._viz_common import open_run, parse_frames, prepare_dir, require, scene_info
 
 
 class ExportError(ValueError):
@@ -184,7 +184,8 @@ def frame_parts(frame, header: dict) -> list[Part]:
     """Split one frame into parts (particles, other groups, rigid bodies)."""
     fields = frame.fields
     groups = dict(getattr(frame, "groups", None) or {})
-    dim = int(header.get("dim") or (fields["position"].shape[1] if "position" in fields else 3))
+    info = scene_info(header)
+    dim = int(info["dim"] or (fields["position"].shape[1] if "position" in fields else 3))
     fd = {"TimeValue": np.array([float(frame.time)]), "step": np.array([int(frame.step)], np.int64),
           "dt": np.array([float(getattr(frame, "dt", np.nan))])}
     for k, v in (getattr(frame, "diagnostics", None) or {}).items():
@@ -203,7 +204,7 @@ def frame_parts(frame, header: dict) -> list[Part]:
         part = _vertex_part("particles" if g == "fluid" else g, fields[pkey], members, dim)
         part.field_data = fd
         parts.append(part)
-    specs = {b.get("name"): b for b in header.get("bodies") or []}
+    specs = {b.get("name"): b for b in info["bodies"]}
     for name, state in (getattr(frame, "rigid", None) or {}).items():
         part = _body_part(f"body_{name}", specs.get(name, {}), state, dim)
         part.field_data = fd
@@ -213,7 +214,7 @@ def frame_parts(frame, header: dict) -> list[Part]:
 
 def static_parts(header: dict) -> list[Part]:
     """Parts that do not change over the run (obstacles)."""
-    return [p for k, ob in enumerate(header.get("obstacles") or []) if (p := _obstacle_part(ob, k)) is not None]
+    return [p for k, ob in enumerate(scene_info(header)["obstacles"]) if (p := _obstacle_part(ob, k)) is not None]
 
 
 # ---- VTK XML (.vtu + .pvd) ------------------------------------------------------------------
@@ -443,7 +444,7 @@ def export_run(run, out_dir, *, format: str = "vtk", frames=None, progress: bool
     run = open_run(run, ExportError)
     indices = parse_frames(frames, len(run), ExportError)
     out = prepare_dir(out_dir, ExportError)
-    stem = (path.name.split(".")[0] if path is not None else "") or str((run.header or {}).get("scene") or "run")
+    stem = (path.name.split(".")[0] if path is not None else "") or scene_info(run.header)["name"] or "run"
     from tqdm import tqdm
 
     try:

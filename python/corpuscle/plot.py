@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._viz_common import check_file_output, open_run, require, units_of
+from ._viz_common import check_file_output, open_run, require, scene_info, units_of
 
 
 class PlotError(ValueError):
@@ -50,10 +50,10 @@ FORMATS = (".png", ".pdf", ".svg")
 def available_series(run) -> dict[str, np.ndarray]:
     """Every per-frame series the run has, by name, with at least one finite value."""
     names: list[str] = ["dt"]
-    for frame in run:
-        for k in (getattr(frame, "diagnostics", None) or {}):
-            if k not in names and k not in ("time", "step"):
-                names.append(k)
+    recorded = getattr(run, "diagnostic_names", None)
+    if recorded is None:
+        recorded = list(dict.fromkeys(k for frame in run for k in (getattr(frame, "diagnostics", None) or {})))
+    names += [k for k in recorded if k not in names and k not in ("time", "step")]
     out = {}
     for k in names:
         try:
@@ -138,7 +138,7 @@ def plot_run(run, out=None, *, series: list[str] | str | None = None, width: flo
     for ax in axes.flat[:len(panels)]:
         ax.tick_params(labelbottom=True)
         ax.set_xlabel("time [s]")
-    name = header.get("scene") or header.get("kind") or ""
+    name = scene_info(header)["name"]
     fig.suptitle(f"{name}: {len(run)} frames, t = {np.nanmin(t):.4g}..{np.nanmax(t):.4g} s".lstrip(": "))
     if out is not None:
         try:

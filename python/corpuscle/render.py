@@ -25,13 +25,13 @@ import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Iterable
 
 import numpy as np
 
 from . import _camera, _colors, _overlay
 from ._video import VideoSink, open_sink, output_kind
-from ._viz_common import open_run, parse_frames, parse_index, parse_size, units_of
+from ._viz_common import DIE_FACES, open_run, parse_frames, parse_index, parse_size, scene_info, units_of
 
 
 class RenderError(ValueError):
@@ -55,8 +55,6 @@ PIP_RGB = (26, 26, 32)
 MIN_RADIUS_PX = 0.75
 # percentiles used for the default colour range (robust to a few extreme particles)
 ROBUST_PERCENTILES = (1.0, 99.0)
-# standard die: face number -> outward normal (opposite faces sum to 7)
-DEFAULT_DIE_FACES = {"1": [1, 0, 0], "6": [-1, 0, 0], "2": [0, 1, 0], "5": [0, -1, 0], "3": [0, 0, 1], "4": [0, 0, -1]}
 # pip layouts on a face, in units of the pip spacing, for 1..6
 PIPS = {
     1: [(0, 0)],
@@ -136,29 +134,15 @@ def parse_fps(fps: float | str) -> float:
 # ---- scene description from the run header ----------------------------------------------------
 
 
-def _find_key(obj: Any, key: str) -> Any:
-    """First value stored under ``key`` anywhere in nested dicts."""
-    if isinstance(obj, dict):
-        if key in obj:
-            return obj[key]
-        for v in obj.values():
-            found = _find_key(v, key)
-            if found is not None:
-                return found
-    return None
-
-
-def up_axis(header: dict) -> str:
-    """World up axis ('+z', '-y', ...): header 'up', else opposite the gravity vector, else +z."""
-    up = header.get("up")
+def up_axis(info: dict) -> str:
+    """World up axis ('+z', '-y', ...): the header's 'up', else opposite gravity, else +z."""
+    up = info.get("up")
     if isinstance(up, str) and re.fullmatch(r"[+-]?[xyz]", up):
         return up if up[0] in "+-" else "+" + up
-    g = _find_key(header.get("parameters", {}), "gravity")
-    if isinstance(g, (list, tuple)) and len(g) == 3:
-        g = np.asarray(g, dtype=float)
-        if np.any(g != 0):
-            k = int(np.argmax(np.abs(g)))
-            return ("-" if g[k] > 0 else "+") + "xyz"[k]
+    g = info.get("gravity")
+    if g is not None and any(g):
+        k = int(np.argmax(np.abs(g)))
+        return ("-" if g[k] > 0 else "+") + "xyz"[k]
     return "+z"
 
 
@@ -172,20 +156,18 @@ class _Scene:
     bodies: dict
     radius: float | None
     name: str
+    up: str
 
 
 def _scene(header: dict, dim: int) -> _Scene:
-    bodies = {b.get("name", f"body{i}"): b for i, b in enumerate(header.get("bodies") or [])}
-    r = header.get("particle_radius")
-    if r is None and header.get("h"):
-        r = 0.5 * float(header["h"])
-    return _Scene(dim, header.get("container"), list(header.get("obstacles") or []), bodies,
-                  float(r) if r else None, str(header.get("scene") or header.get("kind") or ""))
+    info = scene_info(header)
+    bodies = {b.get("name", f"body{i}"): b for i, b in enumerate(info["bodies"])}
+    return _Scene(dim, info["container"], info["obstacles"], bodies, info["particle_radius"], info["name"], up_axis(info))
 
 
 def _field_label(name: str, header: dict) -> str:
     u = units_of(name, header)
-    return f"{name} [{u}]" if u and u != "1" else name
+    return f"{name} [{u}]" if u and u != "-" else name
 
 
 # ---- the renderer ---------------------------------------------------------------------------
@@ -200,12 +182,15 @@ class FrameRenderer:
     ``sample_frames``, or of the frames seen so far, widened as needed); ``log`` colour on
     log(1+v) (default: on for 2-D pressure); ``ramp`` a name in ``_colors.RAMPS``;
     ``camera`` (azimuth, elevation[, distance]) for 3-D; ``ghosts`` draws ghost particles;
-    ``overlay`` the time/step text; ``colorbar`` the colour bar.
+    ``cutaway`` leaves out the particles nearer the camera than the rigid bodies' centres (or
+    than the scene centre without bodies) so a die inside the fluid shows (default: on in
+    3-D scenes with a rigid body); ``overlay`` the time/step text; ``colorbar`` the colour bar.
     """
 
     def __init__(self, header: dict, *, size=(1280, 720), color: str | None = None, value_range=None,
                  log: bool | None = None, ramp: str | None = None, camera=None, ghosts: bool = False,
-                 overlay: bool = True, colorbar: bool = True, sample_frames: Iterable = ()):
+                 cutaway: bool | None = None, overlay: bool = True, colorbar: bool = True,
+                 sample_frames: Iterable = ()):
         self.header = dict(header or {})
         self.size = parse_size(size, RenderError)
         self.color_request = color
@@ -216,6 +201,7 @@ class FrameRenderer:
         self.ramp_request = ramp
         self.camera_request = parse_camera(camera)
         self.ghosts = bool(ghosts)
+        self.cutaway = cutaway
         self.overlay = bool(overlay)
         self.colorbar = bool(colorbar)
         self._samples = list(sample_frames)
@@ -229,7 +215,7 @@ class FrameRenderer:
         if "position" not in fields:
             raise RenderError("frames have no 'position' field: nothing to draw")
         pos = fields["position"]
-        dim = int(self.header.get("dim") or (pos.shape[1] if pos.ndim == 2 else 3))
+        dim = int(scene_info(self.header)["dim"] or (pos.shape[1] if pos.ndim == 2 else 3))
         if dim not in (2, 3):
             raise RenderError(f"can only render 2-D or 3-D scenes, got dim={dim}")
         self.dim = dim
@@ -361,13 +347,13 @@ class FrameRenderer:
             else:
                 target, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
                 az, el = 35.0, 25.0
-            self.up = up_axis(self.header)
             dist = None
             if self.camera_request is not None:
                 az, el, dist = self.camera_request
             if dist is None:
                 dist = _camera.fit_distance(radius * 1.02, vw, h)
-            self.camera = _camera.orbit(target, az, el, dist, self.up, vw, h)
+            self.camera = _camera.orbit(target, az, el, dist, self.scene.up, vw, h)
+            self.target = target
             self.extent = 2 * radius
         if self.scene.radius is None:
             n = max(1, len(frame.fields["position"]))
@@ -400,16 +386,17 @@ class FrameRenderer:
             self._grow_range(self._sample_values(frame))
         lo, hi = self._trange if self._trange is not None else (0.0, 1.0)
         sphere = self.dim == 3
+        clip = self._clip_depth(frame)
         # fluid particles
         R.splat(img, depth, pos, values, cam, self.camera.ortho, self.scene.radius, MIN_RADIUS_PX,
                 self.lut if values is not None else None, lo, hi, 1 if self.log else 0,
-                np.array(_colors.UNIFORM, np.uint8), np.array(_colors.NAN_COLOR, np.uint8), sphere, sphere)
+                np.array(_colors.UNIFORM, np.uint8), np.array(_colors.NAN_COLOR, np.uint8), sphere, sphere, clip)
         # ghost particles, smaller and grey
         if self.ghosts:
             gp = self._ghost_positions(frame)
             if gp is not None and len(gp):
                 R.splat(img, depth, gp, None, cam, self.camera.ortho, 0.6 * self.scene.radius, MIN_RADIUS_PX, None,
-                        0.0, 1.0, 0, np.array(GHOST_RGB, np.uint8), np.array(GHOST_RGB, np.uint8), sphere, sphere)
+                        0.0, 1.0, 0, np.array(GHOST_RGB, np.uint8), np.array(GHOST_RGB, np.uint8), sphere, sphere, clip)
         if self.dim == 3:
             self._draw_bodies_3d(img, depth, frame)
             self._draw_container_3d(img, depth)
@@ -420,6 +407,18 @@ class FrameRenderer:
         if self.panel and self.field is not None:
             _overlay.draw_colorbar(img, self.lut, lo, hi, self.log, self.label)
         return img
+
+    def _clip_depth(self, frame) -> float:
+        """View depth of the cutaway plane: the nearest rigid-body centre (or the scene centre)."""
+        if self.dim != 3 or self.cutaway is False:
+            return -math.inf
+        centres = [np.asarray(st.get("position", [0, 0, 0]), float)[:3]
+                   for name, st in (getattr(frame, "rigid", None) or {}).items() if name in self.scene.bodies]
+        if not centres:
+            if not self.cutaway:
+                return -math.inf
+            centres = [self.target]
+        return float(np.min(self.camera.view(np.array(centres))[:, 2]))
 
     def _ghost_positions(self, frame) -> np.ndarray | None:
         groups = getattr(frame, "groups", {}) or {}
@@ -456,7 +455,7 @@ class FrameRenderer:
                     ring = centre + rho * (np.cos(theta)[:, None] * a + np.sin(theta)[:, None] * b)
                     self._lines(img, depth, ring, True, CONTAINER_RGB, 1.5 * lw, 0.9, False)
             # equator around the up axis, hidden where particles are in front of it
-            e1, e2, _ = _camera.basis(self.up)
+            e1, e2, _ = _camera.basis(self.scene.up)
             ring = ctr + r * (np.cos(theta)[:, None] * e1 + np.sin(theta)[:, None] * e2)
             self._lines(img, depth, ring, True, CONTAINER_RGB, lw, 0.45, True)
         elif c.get("type") == "box":
@@ -487,7 +486,7 @@ class FrameRenderer:
             if shape != "box" or "half_extents" not in spec:
                 continue
             he = np.asarray(spec["half_extents"], float)[:3]
-            faces = spec.get("faces") or (DEFAULT_DIE_FACES if "die" in name.lower() else {})
+            faces = spec.get("faces") or (DIE_FACES if "die" in name.lower() else {})
             self._box_triangles(pos, rot, he, faces, tris, cols)
         if tris:
             v = self.camera.project(np.concatenate(tris).reshape(-1, 3))[:, :3].reshape(-1, 9)
@@ -547,7 +546,6 @@ class FrameRenderer:
                     cols.append(col)
 
     def _draw_scene_2d(self, img, frame) -> None:
-        R = self._raster
         # rigid bodies (boxes) rotated in the plane
         for name, state in (getattr(frame, "rigid", None) or {}).items():
             spec = self.scene.bodies.get(name, {})
@@ -655,7 +653,8 @@ def add_live_render_arguments(parser: argparse.ArgumentParser) -> None:
 
 def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: float = 30.0, color: str | None = None,
                value_range=None, log: bool | None = None, ramp: str | None = None, camera=None, ghosts: bool = False,
-               overlay: bool = True, colorbar: bool = True, progress: bool | None = None) -> RenderResult:
+               cutaway: bool | None = None, overlay: bool = True, colorbar: bool = True,
+               progress: bool | None = None) -> RenderResult:
     """Render a recorded run (path or opened Run) to ``out``.
 
     ``out`` decides the output: ``.mp4`` (H.264), ``.gif``, ``.png`` (one frame: ``frame``,
@@ -680,7 +679,7 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
     # colour range from up to 12 frames spread over the selection (stable over the whole video)
     picks = sorted({indices[int(round(k))] for k in np.linspace(0, len(indices) - 1, min(12, len(indices)))})
     renderer = FrameRenderer(run.header, size=size, color=color, value_range=value_range, log=log, ramp=ramp,
-                             camera=camera, ghosts=ghosts, overlay=overlay, colorbar=colorbar,
+                             camera=camera, ghosts=ghosts, cutaway=cutaway, overlay=overlay, colorbar=colorbar,
                              sample_frames=[run[i] for i in picks])
     start = time.perf_counter()
     from tqdm import tqdm
@@ -703,7 +702,7 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
 def _cmd(args: argparse.Namespace) -> int:
     res = render_run(args.run, args.output, frames=args.frames, frame=args.frame, size=args.size, fps=args.fps,
                      color=args.color, value_range=args.range, log=args.log, ramp=args.ramp, camera=args.camera,
-                     ghosts=args.ghosts, overlay=not args.no_overlay, colorbar=not args.no_colorbar,
+                     ghosts=args.ghosts, cutaway=args.cutaway, overlay=not args.no_overlay, colorbar=not args.no_colorbar,
                      progress=False if args.quiet else None)
     if not args.quiet:
         print(f"wrote {res.path} ({res.frames} frame{'s' if res.frames != 1 else ''}, {res.size[0]}x{res.size[1]}, {res.seconds:.1f} s)")
@@ -731,6 +730,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--ramp", choices=sorted(_colors.RAMPS), help="colour ramp (default: heat in 2-D, ocean in 3-D)")
     p.add_argument("--camera", metavar="AZ,EL[,DIST]", help="3-D camera: azimuth and elevation in degrees, distance in m")
     p.add_argument("--ghosts", action="store_true", help="draw ghost (boundary) particles too")
+    cut = p.add_mutually_exclusive_group()
+    cut.add_argument("--cutaway", dest="cutaway", action="store_true", default=None,
+                     help="leave out particles in front of the die (or the scene centre) so it shows "
+                          "(default in 3-D scenes with a rigid body)")
+    cut.add_argument("--no-cutaway", dest="cutaway", action="store_false", help="draw every particle")
     p.add_argument("--no-overlay", action="store_true", help="leave out the time/step text")
     p.add_argument("--no-colorbar", action="store_true", help="leave out the colour bar")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")

@@ -128,7 +128,7 @@ int64_t splat_particles(const Target& t, const Camera& cam, const SplatSpec& s, 
       const float* q = s.pos + i * s.dim;
       const Projected p = project(cam, q[0], q[1], s.dim > 2 ? q[2] : 0.0f);
       const float r = fmaxf(s.radius * p.scale, s.min_radius_px);
-      const bool culled = (!cam.ortho && p.z <= kNear) || !(p.x + r >= 0.0f) || !(p.x - r <= t.width) ||
+      const bool culled = (!cam.ortho && p.z <= kNear) || p.z < s.clip_depth || !(p.x + r >= 0.0f) || !(p.x - r <= t.width) ||
                           !(p.y + r >= 0.0f) || !(p.y - r <= t.height);
       if (culled) {
         band_lo[i] = 1;

@@ -151,6 +151,7 @@ struct SplatSpec {
   float min_radius_px;     // smallest disc drawn, so no particle vanishes between pixel centres
   int sphere;              // 1: shaded sphere with per-pixel depth; 0: flat disc
   int depth_test;          // 1: nearest wins (depth buffer); 0: later particles paint over earlier
+  float clip_depth;        // particles nearer than this view depth are left out (cutaway); -inf: none
 };
 
 // draw particles; returns how many were on screen

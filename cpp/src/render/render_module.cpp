@@ -7,6 +7,7 @@
 #include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -63,14 +64,14 @@ NB_MODULE(_render, m) {
       "splat",
       [](Image img, std::optional<Depth> depth, Floats2 pos, std::optional<Floats2> values, Floats1 cam, bool ortho,
          float radius, float min_radius_px, std::optional<Bytes2> lut, float lo, float hi, int transform, Bytes1 base,
-         Bytes1 nan_color, bool sphere, bool depth_test) {
+         Bytes1 nan_color, bool sphere, bool depth_test, float clip_depth) {
         Target t = make_target(img, depth);
         const Camera c = make_camera(cam, ortho);
         check_rgb(base);
         check_rgb(nan_color);
         if (pos.shape(1) != 2 && pos.shape(1) != 3) throw std::invalid_argument("positions must have shape (n, 2) or (n, 3)");
         SplatSpec s{pos.data(), static_cast<int64_t>(pos.shape(0)), static_cast<int>(pos.shape(1)), nullptr, 1,
-                    radius, min_radius_px, sphere ? 1 : 0, depth_test ? 1 : 0};
+                    radius, min_radius_px, sphere ? 1 : 0, depth_test ? 1 : 0, clip_depth};
         if (values) {
           if (values->shape(0) != pos.shape(0)) throw std::invalid_argument("values must have one row per particle");
           s.values = values->data();
@@ -91,9 +92,10 @@ NB_MODULE(_render, m) {
       nb::arg("image"), nb::arg("depth").none(), nb::arg("positions"), nb::arg("values").none(), nb::arg("camera"),
       nb::arg("ortho"), nb::arg("radius"), nb::arg("min_radius_px"), nb::arg("lut").none(), nb::arg("lo"),
       nb::arg("hi"), nb::arg("transform"), nb::arg("base"), nb::arg("nan_color"), nb::arg("sphere"),
-      nb::arg("depth_test"),
+      nb::arg("depth_test"), nb::arg("clip_depth") = -std::numeric_limits<float>::infinity(),
       "Draw particles as lit sphere impostors (sphere=True) or flat discs, coloured by `values` through\n"
-      "`lut` over [lo, hi] after `transform` (0 linear, 1 signed log1p); returns the number on screen.");
+      "`lut` over [lo, hi] after `transform` (0 linear, 1 signed log1p), leaving out those nearer than\n"
+      "`clip_depth` (a cutaway); returns the number drawn.");
 
   m.def(
       "triangles",

@@ -1,0 +1,385 @@
+"""corpuscle render: rasterizer pixels and colours, scenes, outputs and bad input."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from corpuscle import _colors, _render, render
+from corpuscle._viz_cli import main
+from corpuscle.render import FrameRenderer, LiveRender, RenderError, render_run
+
+import viz_runs
+
+BLACK, WHITE = (0, 0, 0), (255, 255, 255)
+HEAT_STOPS = [(0, 0, 0), (0, 0, 255), (0, 255, 255), (0, 255, 0), (255, 255, 0), (255, 0, 0), (255, 255, 255)]
+
+
+def frame_of(positions, dim=None, t=0.0, step=0, rigid=None, **fields):
+    """A frame-like object (the attributes FrameRenderer reads)."""
+    f = {"position": np.asarray(positions, np.float32)}
+    f.update({k: np.asarray(v, np.float32) for k, v in fields.items()})
+    return SimpleNamespace(fields=f, groups={}, rigid=rigid or {}, time=t, step=step, index=0, diagnostics={})
+
+
+def shade_reference(base, nx, ny, nz):
+    """NumPy float64 reference of raster.h ``shade`` (Lambert + Blinn-Phong^16 key light)."""
+    light = np.array([-0.42, 0.56, 0.71])
+    half = np.array([-0.22, 0.29, 0.93])
+    n = np.array([nx, ny, nz])
+    d = max(n @ light, 0.0)
+    s = max(n @ half, 0.0) ** 16
+    v = np.asarray(base, float) * (0.32 + 0.68 * d) + 255 * 0.28 * s
+    return np.floor(np.minimum(v, 255) + 0.5).astype(np.uint8)
+
+
+def tunnel_renderer(**kw):
+    """A 400x200 2-D renderer of the test channel, no overlay or colour bar."""
+    kw.setdefault("overlay", False)
+    kw.setdefault("colorbar", False)
+    return FrameRenderer(viz_runs.tunnel_header() | {"particle_radius": 0.02}, size=(400, 200), **kw)
+
+
+# ---- colour ramps ---------------------------------------------------------------------------
+
+
+def test_heat_ramp_has_the_seven_seed_stops_in_order():
+    lut = _colors.make_lut("heat", 6 * 64 + 1)
+    for k, stop in enumerate(HEAT_STOPS):
+        np.testing.assert_allclose(lut[min(k * 64, len(lut) - 1)], stop, atol=4)
+
+
+def test_colour_mapping_is_log_of_p_plus_one_for_pressure():
+    lut = _colors.make_lut("heat")
+    p = np.array([0.0, math.e - 1, math.e ** 2 - 1])
+    # log(p+1) = 0, 1, 2 over the range 0..2: the bottom, middle and top of the ramp
+    cols = _colors.map_values(p, lut, 0.0, 2.0, log=True)
+    assert tuple(cols[0]) == BLACK and tuple(cols[2]) == WHITE
+    np.testing.assert_array_equal(cols[1], lut[128])
+
+
+# ---- the compiled rasterizer ------------------------------------------------------------------
+
+
+def test_flat_disc_covers_exactly_the_pixel_centres_inside_its_radius():
+    img = np.zeros((20, 30, 3), np.uint8)
+    cam = np.array([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 1, 0, 20], np.float32)  # ortho, 1 px per unit, y up
+    pos = np.array([[10.0, 10.0]], np.float32)  # screen (10, 10)
+    red = np.array([255, 0, 0], np.uint8)
+    n = _render.splat(img, None, pos, None, cam, True, 3.0, 0.75, None, 0, 1, 0, red, red, False, False)
+    assert n == 1
+    ys, xs = np.nonzero(img[..., 0])
+    d2 = (xs + 0.5 - 10) ** 2 + (ys + 0.5 - 10) ** 2
+    assert d2.max() <= 9.0
+    # every pixel centre within the radius is covered
+    yy, xx = np.mgrid[0:20, 0:30]
+    inside = (xx + 0.5 - 10) ** 2 + (yy + 0.5 - 10) ** 2 <= 9.0
+    np.testing.assert_array_equal(img[..., 0] == 255, inside)
+
+
+def test_tiny_particles_still_light_a_pixel():
+    cam = np.array([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 1, 0, 10], np.float32)
+    white = np.array([255, 255, 255], np.uint8)
+    for p in ([2.3, 7.9], [6.51, 3.49], [5.0, 5.0], [0.02, 9.97]):
+        img = np.zeros((10, 10, 3), np.uint8)
+        _render.splat(img, None, np.array([p], np.float32), None, cam, True, 1e-4, 0.75, None, 0, 1, 0, white, white,
+                      False, False)
+        ys, xs = np.nonzero(img[..., 0])
+        assert 1 <= len(xs) <= 4
+        assert np.all(np.hypot(xs + 0.5 - p[0], ys + 0.5 - (10 - p[1])) <= 0.75)
+
+
+def test_sphere_shading_matches_the_reference_and_the_nearer_particle_wins():
+    h = w = 64
+    lut = _colors.make_lut("heat")
+    # orthographic camera looking down -z at the origin (forward = -z), 100 px per unit
+    cam = np.array([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 5, 100, 32, 32], np.float32)
+    for order in ((0, 1), (1, 0)):
+        img = np.zeros((h, w, 3), np.uint8)
+        depth = np.full((h, w), np.inf, np.float32)
+        pos = np.array([[0, 0, 1.0], [0, 0, 0.0]], np.float32)[list(order)]  # z=1 is nearer
+        val = np.array([[1.0], [0.0]], np.float32)[list(order)]
+        _render.splat(img, depth, pos, val, cam, True, 0.1, 0.75, lut, 0.0, 1.0, 0,
+                      np.zeros(3, np.uint8), np.zeros(3, np.uint8), True, True)
+        # pixel (32, 32) has its centre 0.5 px off the sphere's axis
+        nx, ny = 0.5 / 10, -0.5 / 10
+        expect = shade_reference(lut[-1], nx, ny, math.sqrt(1 - nx * nx - ny * ny))
+        np.testing.assert_allclose(img[32, 32], expect, atol=1)
+        assert depth[32, 32] == pytest.approx(4.0 - 0.1 * math.sqrt(1 - nx * nx - ny * ny), abs=1e-5)
+
+
+def test_projection_in_python_matches_the_rasterizer():
+    r = FrameRenderer(viz_runs.magic8ball_header(), size=(320, 240), overlay=False, colorbar=False, color="none")
+    pts = np.array([[0.05, -0.03, 0.02], [-0.1, 0.04, -0.06], [0.0, 0.0, 0.0]])
+    empty = r.render(frame_of(np.zeros((0, 3))))
+    for p in pts:
+        img = r.render(frame_of(p[None]))
+        diff = np.any(img != empty, axis=2)
+        ys, xs = np.nonzero(diff)
+        x, y = r.camera.project(p[None])[0, :2]
+        assert abs(xs.mean() + 0.5 - x) < 0.6 and abs(ys.mean() + 0.5 - y) < 0.6
+
+
+# ---- 2-D scenes ------------------------------------------------------------------------------
+
+
+def test_2d_particles_land_on_the_expected_pixels_with_the_ramp_colour():
+    r = tunnel_renderer(value_range="0:10", log=False)
+    pos = np.array([[1.0, 0.5 + 0.3], [0.2, 0.2], [1.8, 0.9]])
+    p = np.array([2.5, 0.0, 10.0])
+    img = r.render(frame_of(pos, pressure=p))
+    # channel [0,2]x[0,1] fitted into 400x200 with a 4 % margin: 184 px per metre, centred
+    assert r.camera.focal == pytest.approx(184.0)
+    px = 200 + 184 * (pos[:, 0] - 1.0)
+    py = 100 - 184 * (pos[:, 1] - 0.5)
+    expect = _colors.map_values(p, _colors.make_lut("heat"), 0.0, 10.0, log=False)
+    for k in range(3):
+        np.testing.assert_array_equal(img[int(py[k]), int(px[k])], expect[k])
+
+
+def test_2d_default_is_log_pressure_on_the_heat_ramp_with_airfoil_and_walls():
+    r = tunnel_renderer(value_range=f"0:{math.e ** 2 - 1}")
+    img = r.render(frame_of([[1.6, 0.2]], pressure=[math.e - 1]))
+    assert r.field == "pressure" and r.log
+    x, y = r.camera.project(np.array([[1.6, 0.2]]))[0, :2]
+    np.testing.assert_array_equal(img[int(y), int(x)], _colors.make_lut("heat")[128])
+    # the airfoil is filled: its centre has the obstacle colour
+    x, y = r.camera.project(np.array([[0.8, 0.5]]))[0, :2]
+    np.testing.assert_array_equal(img[int(y), int(x)], render.OBSTACLE_FILL)
+    # the bottom wall is drawn: the wall row is brighter than the background
+    x, y = r.camera.project(np.array([[1.0, 0.0]]))[0, :2]
+    assert img[int(y), int(x)].mean() > 150 > r._background[int(y), int(x)].mean()
+
+
+def test_default_colour_range_is_robust_percentiles():
+    rng = np.random.default_rng(3)
+    pos = rng.random((20000, 2)) * [2, 1]
+    vals = rng.random(20000) * 100
+    vals[:10] = 1e6  # a few extreme particles do not stretch the range
+    r = tunnel_renderer(log=False)
+    r.render(frame_of(pos, pressure=vals))
+    lo, hi = r.color_range
+    assert lo == pytest.approx(1.0, abs=0.5) and hi == pytest.approx(99.0, abs=0.5)
+
+
+# ---- 3-D scenes ------------------------------------------------------------------------------
+
+
+def die_frame(orientation=(1, 0, 0, 0)):
+    return frame_of(np.array([[0.0, 0.0, -0.12]]), rigid={"die": {"position": np.zeros(3), "orientation": np.array(orientation, float)}})
+
+
+def test_die_is_a_lit_cube_with_pips_on_the_face_toward_the_camera():
+    hdr = viz_runs.magic8ball_header()
+    half = hdr["bodies"][0]["half_extents"][0]
+    six = [(a, b) for a in (-1, 1) for b in (-1, 0, 1)]
+    # (camera azimuth, face normal, pips in face units, a bare spot): face 1 from +x, face 6 from -x
+    for az, normal, pips, bare in ((0.0, [1.0, 0, 0], [(0, 0)], (1.0, 1.0)), (180.0, [-1.0, 0, 0], six, (0.0, 0.5))):
+        r = FrameRenderer(hdr, size=(320, 240), camera=f"{az},8", overlay=False, colorbar=False, color="none")
+        img = r.render(die_frame())
+        normal = np.array(normal)
+        u = np.array([0, 1.0, 0])
+        v = np.cross(normal, u)
+        on_face = lambda a, b: normal * half + 0.5 * half * (a * u + b * v)  # noqa: E731
+        for a, b in pips:
+            x, y = r.camera.project(on_face(a, b)[None])[0, :2]
+            assert img[int(y), int(x)].max() < 60, f"pip ({a}, {b}) should be dark"
+        # away from the pips the face is bright and neutral (ivory)
+        x, y = r.camera.project(on_face(*bare)[None])[0, :2]
+        c = img[int(y), int(x)].astype(int)
+        assert c.min() > 120 and c.max() - c.min() < 40
+
+
+def test_die_faces_away_from_the_light_are_darker():
+    r = FrameRenderer(viz_runs.magic8ball_header(), size=(320, 240), camera="45,30", overlay=False, colorbar=False,
+                      color="none")
+    img = r.render(die_frame())
+    half = 0.032
+    top = r.camera.project(np.array([[0.3 * half, -0.3 * half, half]]))[0, :2]   # +z face, lit from above
+    side = r.camera.project(np.array([[half, -0.6 * half, -0.6 * half]]))[0, :2]  # +x face
+    assert img[int(top[1]), int(top[0])].mean() != img[int(side[1]), int(side[0])].mean()
+
+
+def test_3d_container_outline_and_particles_are_drawn(tmp_path):
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=2)
+    out = tmp_path / "m8.png"
+    res = render_run(tmp_path / "m8.cps", out, size=(320, 240), progress=False)
+    assert res.frames == 1 and out.exists()
+    from PIL import Image
+
+    img = np.asarray(Image.open(out))
+    # the sphere's outline: a ring of container-coloured pixels
+    ring_pixels = np.all(np.abs(img.astype(int) - render.CONTAINER_RGB) < 60, axis=2)
+    assert ring_pixels.sum() > 200
+
+
+def test_ghosts_are_drawn_only_when_asked(tmp_path):
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=1)
+    import corpuscle
+
+    frame = corpuscle.open(tmp_path / "m8.cps")[0]
+    hdr = viz_runs.magic8ball_header()
+    a = FrameRenderer(hdr, size=(200, 150), overlay=False, colorbar=False).render(frame)
+    b = FrameRenderer(hdr, size=(200, 150), overlay=False, colorbar=False, ghosts=True).render(frame)
+    grey = np.all(b == render.GHOST_RGB, axis=2) | np.all(np.abs(b.astype(int) - 120) < 40, axis=2)
+    assert np.count_nonzero(np.any(a != b, axis=2)) > 50 and grey.any()
+
+
+def test_no_blank_frames(tmp_path):
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=3)
+    viz_runs.write_tunnel(tmp_path / "wt.cps", frames=3)
+    import corpuscle
+
+    for name in ("m8.cps", "wt.cps"):
+        run = corpuscle.open(tmp_path / name)
+        r = FrameRenderer(run.header, size=(200, 120), overlay=False, colorbar=False)
+        for frame in run:
+            img = r.render(frame)
+            drawn = np.any(img != r._background, axis=2).mean()
+            assert drawn > 0.05, f"{name} frame {frame.index}: only {drawn:.1%} of pixels drawn"
+
+
+def test_overlay_shows_time_and_step():
+    hdr = viz_runs.magic8ball_header()
+    f = frame_of(np.zeros((1, 3)))
+    with_text = FrameRenderer(hdr, size=(320, 240), colorbar=False).render(f)
+    without = FrameRenderer(hdr, size=(320, 240), overlay=False, colorbar=False).render(f)
+    assert np.any(with_text[:20, :150] != without[:20, :150])
+
+
+# ---- outputs ---------------------------------------------------------------------------------
+
+
+def test_mp4_decodes_to_the_expected_frames_and_size(tmp_path):
+    imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=6)
+    out = tmp_path / "m8.mp4"
+    res = render_run(tmp_path / "m8.cps", out, size=(160, 120), fps=10, frames="1:6", progress=False)
+    assert res.frames == 5
+    gen = imageio_ffmpeg.read_frames(str(out))
+    meta = next(gen)
+    frames = [np.frombuffer(b, np.uint8).reshape(120, 160, 3) for b in gen]
+    assert meta["size"] == (160, 120) and len(frames) == 5
+    assert meta["fps"] == pytest.approx(10)
+    # the first decoded frame looks like frame 1 rendered directly (H.264 is lossy)
+    import corpuscle
+
+    run = corpuscle.open(tmp_path / "m8.cps")
+    r = FrameRenderer(run.header, size=(160, 120), sample_frames=[run[i] for i in range(1, 6)])
+    direct = r.render(run[1])
+    assert np.abs(frames[0].astype(int) - direct.astype(int)).mean() < 6
+
+
+def test_gif_png_and_png_directory(tmp_path):
+    from PIL import Image
+
+    viz_runs.write_tunnel(tmp_path / "wt.cps", frames=4)
+    render_run(tmp_path / "wt.cps", tmp_path / "wt.gif", size=(120, 80), frames="::2", progress=False)
+    with Image.open(tmp_path / "wt.gif") as g:
+        assert g.n_frames == 2 and g.size == (120, 80)
+    render_run(tmp_path / "wt.cps", tmp_path / "frames", size=(120, 80), progress=False)
+    pngs = sorted((tmp_path / "frames").glob("frame_*.png"))
+    assert [p.name for p in pngs] == [f"frame_{k:05d}.png" for k in range(4)]
+    # a single .png is the last frame by default, pixel for pixel (with the same colour range)
+    render_run(tmp_path / "wt.cps", tmp_path / "frames", size=(120, 80), value_range="0:20", progress=False)
+    render_run(tmp_path / "wt.cps", tmp_path / "last.png", size=(120, 80), value_range="0:20", progress=False)
+    np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "last.png")), np.asarray(Image.open(pngs[-1])))
+    render_run(tmp_path / "wt.cps", tmp_path / "first.png", size=(120, 80), frame=0, progress=False)
+    assert not np.array_equal(np.asarray(Image.open(tmp_path / "first.png")), np.asarray(Image.open(pngs[-1])))
+
+
+def test_live_render_hook_matches_offline_rendering(tmp_path):
+    from PIL import Image
+
+    import corpuscle
+
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=3)
+    run = corpuscle.open(tmp_path / "m8.cps")
+    parser = argparse.ArgumentParser()
+    render.add_live_render_arguments(parser)
+    args = parser.parse_args(["--render", str(tmp_path / "live"), "--render-size", "160x120",
+                              "--render-range", "0:0.3", "--render-color", "speed"])
+    assert render.LiveRender.from_args(parser.parse_args([]), run.header) is None
+    with LiveRender.from_args(args, run.header) as live:
+        for frame in run:
+            live.add_frame(frame)
+    render_run(run, tmp_path / "offline", size=(160, 120), color="speed", value_range="0:0.3", progress=False)
+    for k in range(3):
+        a = np.asarray(Image.open(tmp_path / "live" / f"frame_{k:05d}.png"))
+        b = np.asarray(Image.open(tmp_path / "offline" / f"frame_{k:05d}.png"))
+        np.testing.assert_array_equal(a, b)
+
+
+def test_cli_render_writes_a_video(tmp_path, capsys):
+    pytest.importorskip("imageio_ffmpeg")
+    viz_runs.write_tunnel(tmp_path / "wt.cps", frames=3)
+    rc = main(["render", str(tmp_path / "wt.cps"), "-o", str(tmp_path / "wt.mp4"), "--size", "128x96", "-q"])
+    assert rc == 0 and (tmp_path / "wt.mp4").stat().st_size > 0
+
+
+# ---- bad input -------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def runs(tmp_path):
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=3)
+    viz_runs.write_tunnel(tmp_path / "wt.cps", frames=2)
+    return tmp_path
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["render", "{d}/missing.cps", "-o", "{d}/x.png"], "not found"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--color", "vorticity"], "unknown --color field 'vorticity'"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--range", "5:1"], "lo < hi"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--range", "abc"], "--range must be lo:hi"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--range", "0:nan"], "finite"),
+    (["render", "{d}/m8.cps", "-o", "{d}/no/such/dir/x.mp4"], "does not exist"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.avi"], ".mp4, .gif or .png"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--frame", "99"], "out of range"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--frames", "5:2"], "selects no frames"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--frames", "0:3:0"], "step"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--size", "12x9000"], "--size"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--size", "161x120"], "even"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--camera", "30"], "--camera"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--camera", "30,95"], "elevation"),
+    (["render", "{d}/wt.cps", "-o", "{d}/x.png", "--camera", "30,20"], "3-D"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--fps", "0"], "--fps"),
+    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--ramp", "rainbow"], "invalid choice"),
+    (["render", "{d}/m8.cps"], "required"),
+    (["render", "{d}/notarun.cps", "-o", "{d}/x.png"], "cannot read run"),
+])
+def test_bad_input_gives_one_line_and_exit_code_2(runs, capsys, argv, words):
+    (runs / "notarun.cps").write_bytes(b"hello, not a frame stream" * 10)
+    rc = main([a.format(d=runs) for a in argv])
+    err = capsys.readouterr().err
+    assert rc == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("corpuscle: error: "), err
+    assert words in lines[0]
+
+
+def test_errors_are_value_errors_for_the_cli_table():
+    assert issubclass(RenderError, ValueError)
+    with pytest.raises(RenderError, match="lo < hi"):
+        render.parse_range("3:3")
+
+
+def test_cutaway_shows_a_die_buried_in_fluid():
+    hdr = viz_runs.magic8ball_header()
+    # a dense ball of particles all around the die
+    g = np.linspace(-0.13, 0.13, 27)
+    pts = np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
+    pts = pts[np.linalg.norm(pts, axis=1) < 0.14]
+    f = frame_of(pts, rigid={"die": {"position": np.zeros(3), "orientation": np.array([1.0, 0, 0, 0])}})
+    opts = dict(size=(240, 180), camera="0,8", overlay=False, colorbar=False, color="none")
+    cut = FrameRenderer(hdr, **opts).render(f)
+    full = FrameRenderer(hdr, cutaway=False, **opts).render(f)
+    r = FrameRenderer(hdr, **opts)
+    r.render(f)
+    x, y = r.camera.project(np.array([[0.032, 0.016, 0.016]]))[0, :2]  # on face 1, off its pip
+    ivory = lambda c: c.min() > 120 and int(c.max()) - int(c.min()) < 40  # noqa: E731
+    assert ivory(cut[int(y), int(x)]) and not ivory(full[int(y), int(x)])
