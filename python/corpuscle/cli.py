@@ -350,23 +350,27 @@ class _Progress:
 
 
 def _run_header(scene, sim, backend: str, every: int, args: argparse.Namespace) -> dict[str, Any]:
-    """The frame-stream header: what was run, how, by which build."""
+    """The frame-stream header: the simulation's own description (scene name, container,
+    bodies, h, ...) plus what was run, how and by which build."""
     from . import __version__
 
-    return {
+    header = dict(sim.header()) if hasattr(sim, "header") else {}
+    header.update({
         "program": PROG,
         "version": __version__,
         "command": _command_line(args),
         "created": _now_iso(),
-        "scene": scene.to_dict(),
+        "scene": scene.name,
+        "parameters": scene.to_dict(),
         "scene_path": str(scene.path) if scene.path else None,
-        "backend": backend,
+        "backend": getattr(sim, "backend", backend),
         "particles": int(sim.n_particles),
         "ghosts_recorded": bool(args.ghosts),
         "velocity_recorded": bool(args.velocity),
         "record_every": every,
         "host": platform.node(),
-    }
+    })
+    return header
 
 
 def _cmd_run(args: argparse.Namespace) -> int:

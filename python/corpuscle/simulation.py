@@ -279,7 +279,7 @@ class Simulation:
         st = self._sim.state()
         die = st["die"]
         return {
-            "dt": st["dt"], "kinetic_energy": st["kinetic_energy"], "density_error": st["density_error"],
+            "kinetic_energy": st["kinetic_energy"], "density_error": st["density_error"],
             "mean_density": st["mean_density"], "die_height": die["position"][2],
             "die_speed": float(np.linalg.norm(die["velocity"])), "n_particles": float(self.n_particles),
             "n_ghosts": float(st["n_ghost"]), "die_contacts": float(st["die_contacts"]),
