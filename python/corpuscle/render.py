@@ -31,7 +31,7 @@ import numpy as np
 
 from . import _camera, _colors, _overlay
 from ._video import VideoSink, open_sink, output_kind
-from ._viz_common import DIE_FACES, open_run, parse_frames, parse_index, parse_size, scene_info, units_of
+from ._viz_common import DIE_FACES, open_run, parse_frames, parse_index, parse_size, require, scene_info, units_of
 
 
 class RenderError(ValueError):
@@ -207,6 +207,8 @@ class FrameRenderer:
         self._samples = list(sample_frames)
         self._ready = False
         self._raster = _raster()
+        if self.overlay or self.colorbar:
+            require("PIL", "pillow", "frame text and colour bars", RenderError)
 
     # -- set-up on the first frame --
 

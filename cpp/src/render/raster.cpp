@@ -55,39 +55,42 @@ inline uint32_t particle_color(const SplatSpec& s, const ColorSpec& c, int64_t i
   return pack_rgb(c.lut[3 * k], c.lut[3 * k + 1], c.lut[3 * k + 2]);
 }
 
-// draw one disc into rows [row0, row1)
+// draw one disc into rows [row0, row1): each row's covered span comes from the circle, and a
+// pixel whose depth already beats the sphere's nearest point is skipped before any shading
 inline void raster_splat(const Target& t, const SplatSpec& s, const Splat& p, int row0, int row1) {
   const float r = p.r, r2 = r * r, inv_r = 1.0f / r;
-  const int x0 = std::max(0, static_cast<int>(std::floor(p.x - r)));
-  const int x1 = std::min(t.width - 1, static_cast<int>(std::ceil(p.x + r)));
-  const int y0 = std::max(row0, static_cast<int>(std::floor(p.y - r)));
-  const int y1 = std::min(row1 - 1, static_cast<int>(std::ceil(p.y + r)));
   // the depth change across a sphere is its world radius (view units)
   const float rw = s.radius;
+  const float z_front = s.sphere ? p.z - rw : p.z;
+  const bool test = s.depth_test && t.depth;
+  const int y0 = std::max(row0, static_cast<int>(std::ceil(p.y - r - 0.5f)));
+  const int y1 = std::min(row1 - 1, static_cast<int>(std::floor(p.y + r - 0.5f)));
   for (int y = y0; y <= y1; ++y) {
     const float dy = static_cast<float>(y) + 0.5f - p.y;
-    if (dy * dy > r2) continue;
+    const float rem = r2 - dy * dy;
+    if (rem < 0.0f) continue;
+    // pixel centres x + 0.5 within the chord at this row
+    const float half = sqrtf(rem);
+    const int x0 = std::max(0, static_cast<int>(std::ceil(p.x - half - 0.5f)));
+    const int x1 = std::min(t.width - 1, static_cast<int>(std::floor(p.x + half - 0.5f)));
+    const int64_t row = static_cast<int64_t>(y) * t.width;
     for (int x = x0; x <= x1; ++x) {
-      const float dx = static_cast<float>(x) + 0.5f - p.x;
-      const float d2 = dx * dx + dy * dy;
-      if (d2 > r2) continue;
-      const int64_t idx = static_cast<int64_t>(y) * t.width + x;
+      const int64_t idx = row + x;
+      if (test && !(z_front < t.depth[idx])) continue;
       uint8_t* px = t.rgb + 3 * idx;
       if (s.sphere) {
         // impostor normal from the disc offset; its depth bulges toward the camera
+        const float dx = static_cast<float>(x) + 0.5f - p.x;
         const float nx = dx * inv_r, ny = -dy * inv_r;
         const float nz = sqrtf(fmaxf(1.0f - nx * nx - ny * ny, 0.0f));
         const float z = p.z - rw * nz;
-        if (s.depth_test && t.depth) {
+        if (test) {
           if (!(z < t.depth[idx])) continue;
           t.depth[idx] = z;
         }
         shade(p.color, nx, ny, nz, px);
       } else {
-        if (s.depth_test && t.depth) {
-          if (!(p.z < t.depth[idx])) continue;
-          t.depth[idx] = p.z;
-        }
+        if (test) t.depth[idx] = p.z;
         px[0] = channel(p.color, 0);
         px[1] = channel(p.color, 1);
         px[2] = channel(p.color, 2);
