@@ -383,3 +383,16 @@ def test_cutaway_shows_a_die_buried_in_fluid():
     x, y = r.camera.project(np.array([[0.032, 0.016, 0.016]]))[0, :2]  # on face 1, off its pip
     ivory = lambda c: c.min() > 120 and int(c.max()) - int(c.min()) < 40  # noqa: E731
     assert ivory(cut[int(y), int(x)]) and not ivory(full[int(y), int(x)])
+
+
+def test_live_render_takes_a_simulation_style_frame_dict(tmp_path):
+    from PIL import Image
+
+    hdr = viz_runs.magic8ball_header()
+    rec = {"fields": {"position": np.zeros((5, 3), np.float32), "density": np.full(5, 1000.0, np.float32)},
+           "groups": {"position": "fluid", "density": "fluid"},
+           "rigid": {"die": {"position": np.zeros(3), "orientation": np.array([1.0, 0, 0, 0])}},
+           "diagnostics": {"kinetic_energy": 0.0}}
+    with LiveRender(tmp_path / "live.png", hdr, size=(64, 48)) as live:
+        live.add_frame(SimpleNamespace(**rec, time=0.25, step=7))
+    assert Image.open(tmp_path / "live.png").size == (64, 48)

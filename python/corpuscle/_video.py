@@ -73,9 +73,9 @@ class Mp4Sink(VideoSink):
         self._gen.send(image)
 
     def close(self):
-        if self._gen is not None:
-            self._gen.close()
-            self._gen = None
+        gen, self._gen = self._gen, None
+        if gen is not None:
+            gen.close()
 
 
 class GifSink(VideoSink):
@@ -91,11 +91,10 @@ class GifSink(VideoSink):
         self._frames.append(im.quantize(colors=255, method=self._pil.Quantize.FASTOCTREE, dither=self._pil.Dither.NONE))
 
     def close(self):
-        if self._frames:
-            first, rest = self._frames[0], self._frames[1:]
-            first.save(self.path, save_all=True, append_images=rest, duration=max(20, int(round(1000 / self.fps))),
-                       loop=0, optimize=False, disposal=1)
-            self._frames = []
+        frames, self._frames = self._frames, []
+        if frames:
+            frames[0].save(self.path, save_all=True, append_images=frames[1:],
+                           duration=max(20, int(round(1000 / self.fps))), loop=0, optimize=False, disposal=1)
 
 
 class PngSink(VideoSink):
@@ -110,9 +109,9 @@ class PngSink(VideoSink):
         self._last = image.copy()
 
     def close(self):
-        if self._last is not None:
-            self._pil.fromarray(self._last, "RGB").save(self.path)
-            self._last = None
+        last, self._last = self._last, None
+        if last is not None:
+            self._pil.fromarray(last, "RGB").save(self.path)
 
 
 class PngDirSink(VideoSink):

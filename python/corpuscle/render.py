@@ -693,6 +693,10 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
             for i in indices:
                 sink.add(renderer.render(run[i]))
                 bar.update(1)
+        sink.close()
+    except OSError as exc:
+        # a full disk or an encoder that died: one line naming the output
+        raise RenderError(f"cannot write {out}: {exc.strerror or str(exc).splitlines()[0]}") from None
     finally:
         sink.close()
     return RenderResult(Path(os.fspath(out)), len(indices), size, time.perf_counter() - start, renderer.color_range)
