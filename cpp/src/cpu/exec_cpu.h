@@ -15,6 +15,8 @@
 #include <parallel/algorithm>
 #endif
 
+#include "corpuscle/core/lanes.h"
+
 namespace cps {
 
 struct CpuExec {
@@ -46,6 +48,12 @@ struct CpuExec {
     }
 #endif
     for (int i = 0; i < n; ++i) f(i);
+  }
+
+  // parallel_for of a functor f(i, lanes) written for cooperating lanes: one lane per item
+  template <class F>
+  void for_each_lanes(int n, const F& f) const {
+    for_each(n, [&](int i) { f(i, SingleLane{}); });
   }
 
   // a one-item stage (per-scene work)
@@ -83,6 +91,13 @@ struct CpuExec {
     T acc = init;
     for (int c = 0; c < kReduceChunks; ++c) acc = op(acc, part[c]);
     *out = acc;
+  }
+
+  // reduce, then run a one-item stage that reads the result
+  template <class T, class Op, class F>
+  void reduce_then(const T* in, int n, T* out, Op op, T init, const F& f) const {
+    reduce(in, n, out, op, init);
+    f(0);
   }
 
   void zero(void* p, size_t bytes) const { std::memset(p, 0, bytes); }

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/core/lanes.h"
 
 namespace cps {
 
@@ -15,6 +16,13 @@ template <class F>
 __global__ void k_for_each(int n, F f) {
   int i = int(blockIdx.x) * int(blockDim.x) + int(threadIdx.x);
   if (i < n) f(i);
+}
+
+// a warp per item: functor f(i, WarpLanes)
+template <class F>
+__global__ void k_for_each_warp(int n, F f) {
+  int i = int((blockIdx.x * blockDim.x + threadIdx.x) >> 5);
+  if (i < n) f(i, WarpLanes{});
 }
 
 template <class F>
@@ -33,11 +41,49 @@ __global__ void __launch_bounds__(kThreads) k_reduce_block(const T* in, int n, T
   if (threadIdx.x == 0) *out = r;
 }
 
+// reduction fused with a one-item stage run by thread 0 on the result (saves a launch)
+template <class T, class Op, class F, int kThreads>
+__global__ void __launch_bounds__(kThreads) k_reduce_block_then(const T* in, int n, T* out, Op op, T init, F f) {
+  using BlockReduce = cub::BlockReduce<T, kThreads>;
+  __shared__ typename BlockReduce::TempStorage tmp;
+  T acc = init;
+  for (int i = int(threadIdx.x); i < n; i += kThreads) acc = op(acc, in[i]);
+  T r = BlockReduce(tmp).Reduce(acc, op);
+  if (threadIdx.x == 0) {
+    *out = r;
+    f(0);
+  }
+}
+
+// CUB's block radix sort for inputs that fit one block (stable, like the device sort);
+// slots past n are padded with all-ones keys, which sort last
+template <int kThreads, int kItems>
+__global__ void __launch_bounds__(kThreads) k_block_sort(const uint32_t* kin, uint32_t* kout, const int* vin,
+                                                         int* vout, int n, int bits) {
+  using Sort = cub::BlockRadixSort<uint32_t, kThreads, kItems, int>;
+  __shared__ typename Sort::TempStorage tmp;
+  uint32_t k[kItems];
+  int v[kItems];
+  for (int t = 0; t < kItems; ++t) {
+    int idx = int(threadIdx.x) * kItems + t;
+    k[t] = idx < n ? kin[idx] : 0xffffffffu;
+    v[t] = idx < n ? vin[idx] : 0;
+  }
+  Sort(tmp).Sort(k, v, 0, bits);
+  for (int t = 0; t < kItems; ++t) {
+    int idx = int(threadIdx.x) * kItems + t;
+    if (idx < n) {
+      kout[idx] = k[t];
+      vout[idx] = v[t];
+    }
+  }
+}
+
 struct CudaExec {
   static constexpr bool on_device = true;
   static constexpr int kBlock = 128;
   static constexpr int kReduceThreads = 512;
-  static constexpr int kSmallReduce = 1 << 17;
+  static constexpr int kSmallReduce = 1 << 14;
 
   // owning device buffer (zero-filled)
   template <class T>
@@ -90,13 +136,27 @@ struct CudaExec {
   }
 
   template <class F>
+  void for_each_lanes(int n, const F& f) {
+    if (n <= 0) return;
+    long long threads = 32LL * n;
+    k_for_each_warp<<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  template <class F>
   void single(const F& f) {
     k_single<<<1, 1, 0, stream_>>>(f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 
-  // CUB's stable LSD radix sort over the key bits in use
+  // CUB's stable LSD radix sort over the key bits in use: one block when it fits
+  static constexpr int kSortThreads = 512, kSortItems = 16;
   void sort_pairs(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits) {
+    if (n <= kSortThreads * kSortItems) {
+      k_block_sort<kSortThreads, kSortItems><<<1, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, n, bits);
+      CPS_CUDA_LAUNCH_CHECK();
+      return;
+    }
     size_t bytes = 0;
     CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
     ensure_temp(bytes);
@@ -115,6 +175,17 @@ struct CudaExec {
     CPS_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, in, out, n, op, init, stream_));
     ensure_temp(bytes);
     CPS_CUDA_CHECK(cub::DeviceReduce::Reduce(temp_, bytes, in, out, n, op, init, stream_));
+  }
+
+  template <class T, class Op, class F>
+  void reduce_then(const T* in, int n, T* out, Op op, T init, const F& f) {
+    if (n <= kSmallReduce) {
+      k_reduce_block_then<T, Op, F, kReduceThreads><<<1, kReduceThreads, 0, stream_>>>(in, n, out, op, init, f);
+      CPS_CUDA_LAUNCH_CHECK();
+      return;
+    }
+    reduce(in, n, out, op, init);
+    single(f);
   }
 
   void zero(void* p, size_t bytes) { CPS_CUDA_CHECK(cudaMemsetAsync(p, 0, bytes, stream_)); }

@@ -83,6 +83,13 @@ struct ForceVisitor {
     if (j < n_fluid) dv_xsph += dv * (p.mass * k.poly6(r2) * 2.0f / (rho_i + rho_j));
   }
 
+  // combine the partial sums of cooperating lanes
+  template <class Lanes>
+  CPS_HD void reduce(const Lanes& L) {
+    acc_p = L.sum(acc_p);
+    acc_v = L.sum(acc_v);
+    dv_xsph = L.sum(dv_xsph);
+  }
   CPS_HD Vec<D> acceleration() const { return acc_p + acc_v * (p.viscosity / rho_i); }
   CPS_HD Vec<D> xsph_correction() const { return dv_xsph * p.xsph; }
 };

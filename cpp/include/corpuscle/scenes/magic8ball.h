@@ -5,6 +5,7 @@
 // device under CUDA) and Arrays (structure of arrays) are plain data; each stage below is a
 // functor run by a backend's parallel_for. Nothing here knows which backend runs it.
 #pragma once
+#include "corpuscle/core/lanes.h"
 #include "corpuscle/physics/boundary.h"
 #include "corpuscle/physics/rigid.h"
 #include "corpuscle/physics/sph.h"
@@ -129,30 +130,52 @@ CPS_HD CPS_INLINE void raise_flag(int* p) {
 #endif
 }
 
-// stage 1: cell keys of fluid particles and of their ghosts (slot n + i), identity values;
-// item 0 also evaluates this step's container frame
+// cell keys of fluid particle i at x and of its ghost slot n + i, with identity values
+CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x) {
+  const int n = m.n_fluid;
+  a.keys[i] = m.grid.key(x, 0);
+  a.keys[n + i] = needs_ghost(m.wall, x, m.h) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
+  a.idx[i] = i;
+  a.idx[n + i] = n + i;
+}
+
+// this step's container frame from the shake schedule, the API control and the shell state
+CPS_HD CPS_INLINE void prepare_frame(const Model& m, Globals& g) {
+  Vec3 acc, torque;
+  control_at(m, g, g.time, acc, torque);
+  FrameMotion f;
+  f.gravity = qrotate_inv(g.shell_q, m.gravity);
+  f.acc = acc;
+  f.alpha = torque * (1.0f / m.shell_inertia) - g.shell_omega * m.spin_damping;
+  f.omega = g.shell_omega;
+  g.frame = f;
+}
+
+// items of the keys stage: the larger of the particle count and the cell table
+CPS_HD CPS_INLINE int keys_items(const Model& m) {
+  int cells = int(2 * m.grid.ncells);
+  return m.n_fluid > cells ? m.n_fluid : cells;
+}
+
+// the work that starts a step: clear the cell table, key every particle, set the frame
+CPS_HD CPS_INLINE void start_step(const Model& m, Globals* g, const Arrays& a, int i, const Vec3* x) {
+  if (uint32_t(i) < 2 * m.grid.ncells) {
+    a.cell_start[i] = 0u;
+    a.cell_end[i] = 0u;
+  }
+  if (i < m.n_fluid) write_keys(m, a, i, *x);
+  if (i == 0) prepare_frame(m, *g);
+}
+
+// stage 1 (first step, or after the state was replaced): start a step from the current state
 struct KeysStage {
   const Model* model;
   Globals* g;
   Arrays a;
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
-    const int n = m.n_fluid;
-    Vec3 x = a.pos[i];
-    a.keys[i] = m.grid.key(x, 0);
-    a.keys[n + i] = needs_ghost(m.wall, x, m.h) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
-    a.idx[i] = i;
-    a.idx[n + i] = n + i;
-    if (i == 0) {
-      Vec3 acc, torque;
-      control_at(m, *g, g->time, acc, torque);
-      FrameMotion f;
-      f.gravity = qrotate_inv(g->shell_q, m.gravity);
-      f.acc = acc;
-      f.alpha = torque * (1.0f / m.shell_inertia) - g->shell_omega * m.spin_damping;
-      f.omega = g->shell_omega;
-      g->frame = f;
-    }
+    Vec3 x = i < m.n_fluid ? a.pos[i] : Vec3::zero();
+    start_step(m, g, a, i, &x);
   }
 };
 
@@ -194,13 +217,16 @@ struct DensityStage {
   const Globals* g;
   Arrays a;
   GridView<D> grid;
-  CPS_HD void operator()(int i) const {
+  template <class Lanes>
+  CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    for_each_neighbor(grid, x, true, v);
+    for_each_neighbor(grid, x, true, v, L.lane(), L.count());
+    float sum = L.sum(v.sum);
+    if (!L.leader()) return;
     float cut = m.kern.poly6_beyond_plane(body_distance(m.die, g->die, x));
-    float rho = finish_density(m.sph, v.sum / (1.0f - fmin2(cut, 0.5f)));
+    float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     a.rho[i] = rho;
     a.prs[i] = tait_pressure(m.sph, rho);
   }
@@ -227,11 +253,14 @@ struct ForceStage {
   const Globals* g;
   Arrays a;
   GridView<D> grid;
-  CPS_HD void operator()(int i) const {
+  template <class Lanes>
+  CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
     ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
     Vec3 x = a.pos[i];
-    for_each_neighbor(grid, x, true, fv);
+    for_each_neighbor(grid, x, true, fv, L.lane(), L.count());
+    fv.reduce(L);
+    if (!L.leader()) return;
     Vec3 v = a.vel[i];
     Vec3 acc = fv.acceleration() + frame_acceleration(g->frame, x, v);
     StepSums s = StepSums::identity();
@@ -288,20 +317,25 @@ struct FinalizeStage {
   }
 };
 
-// stage 7: integrate fluid (symplectic Euler, XSPH-corrected drift) and enforce the wall
+// stage 7: integrate fluid (symplectic Euler, XSPH-corrected drift), enforce the wall, and
+// start the next step (its keys, cleared cell table and frame) in the same pass
 struct IntegrateStage {
   const Model* model;
   Globals* g;
   Arrays a;
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
-    float dt = g->dt;
-    Vec3 v = a.vel[i] + a.acc[i] * dt;
-    Vec3 x = a.pos[i] + (v + a.xsph[i]) * dt;
-    reflect_at_wall(m.wall, x, v);
-    if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_flag(&g->bad);
-    a.pos[i] = x;
-    a.vel[i] = v;
+    Vec3 x = Vec3::zero();
+    if (i < m.n_fluid) {
+      float dt = g->dt;
+      Vec3 v = a.vel[i] + a.acc[i] * dt;
+      x = a.pos[i] + (v + a.xsph[i]) * dt;
+      reflect_at_wall(m.wall, x, v);
+      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_flag(&g->bad);
+      a.pos[i] = x;
+      a.vel[i] = v;
+    }
+    start_step(m, g, a, i, &x);
   }
 };
 

@@ -10,9 +10,9 @@
 namespace cps::m8 {
 
 // names of the pipeline stages, in order (for profiles)
-inline const char* const kStageNames[] = {"keys", "sort", "reorder", "density", "ghosts",
-                                          "forces", "reduce", "finalize", "integrate"};
-constexpr int kNumStages = 9;
+inline const char* const kStageNames[] = {"sort", "reorder", "density", "ghosts",
+                                          "forces", "reduce+finalize", "integrate+keys"};
+constexpr int kNumStages = 7;
 
 template <class Exec>
 class SimImpl final : public Sim {
@@ -73,6 +73,7 @@ class SimImpl final : public Sim {
     ex_.to_device(vel_[parity_].data(), vel.data(), n * sizeof(Vec3));
     ex_.to_device(id_[parity_].data(), ids.data(), n * sizeof(int));
     sorted_ = false;
+    keys_ready_ = false;
   }
 
   Globals globals() override {
@@ -80,10 +81,14 @@ class SimImpl final : public Sim {
     ex_.to_host(&g, g_.data(), sizeof(Globals));
     return g;
   }
-  void set_globals(const Globals& g) override { ex_.to_device(g_.data(), &g, sizeof(Globals)); }
+  void set_globals(const Globals& g) override {
+    ex_.to_device(g_.data(), &g, sizeof(Globals));
+    keys_ready_ = false;  // the next step re-evaluates its frame from the new control
+  }
 
   void step(long long n) override {
     for (long long k = 0; k < n; ++k) {
+      ensure_keys();
       ex_.launch_step(parity_, [&] { enqueue_step(true); });
       parity_ ^= 1;
     }
@@ -92,7 +97,9 @@ class SimImpl final : public Sim {
 
   void evaluate() override {
     // the same stages as a step, without integration; dt is chosen from these forces
+    ensure_keys();
     ex_.launch_step(-1, [&] { enqueue_step(false); });
+    keys_ready_ = false;
     parity_ ^= 1;
     sorted_ = true;
     ex_.synchronize();
@@ -108,6 +115,7 @@ class SimImpl final : public Sim {
     ex_.synchronize();
     ex_.profile_begin();
     for (long long k = 0; k < n; ++k) {
+      ensure_keys();
       enqueue_step(true);
       parity_ ^= 1;
     }
@@ -150,6 +158,13 @@ class SimImpl final : public Sim {
   }
 
  private:
+  // key the current state when no integration did (first step, replaced state, evaluate)
+  void ensure_keys() {
+    if (keys_ready_) return;
+    ex_.for_each(keys_items(m_), KeysStage{model_.data(), g_.data(), arrays(parity_, parity_ ^ 1)});
+    keys_ready_ = true;
+  }
+
   // the step pipeline; parity_ selects the current buffers, the reorder writes the others
   void enqueue_step(bool integrate) {
     const Model& m = m_;
@@ -158,36 +173,34 @@ class SimImpl final : public Sim {
     Model* md = model_.data();
     Globals* g = g_.data();
     Arrays a = arrays(cur, nxt);
-    // 1. keys of fluid and ghost slots
-    ex_.for_each(n, KeysStage{md, g, a});
-    ex_.mark(0);
+    // 1. keys come from the last step's integration (or ensure_keys)
     // 2. sort by key
     ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits());
-    ex_.mark(1);
+    ex_.mark(0);
     // 3. reorder into the other buffers, ghosts built there, cell ranges
-    ex_.zero(a.cell_start, cells_start_.size() * sizeof(uint32_t));
-    ex_.zero(a.cell_end, cells_end_.size() * sizeof(uint32_t));
     ex_.for_each(cap, ReorderStage{md, g, a});
-    ex_.mark(2);
+    ex_.mark(1);
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
     GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
     // 4. density and pressure
-    ex_.for_each(n, DensityStage{md, g, s, grid});
-    ex_.mark(3);
+    ex_.for_each_lanes(n, DensityStage{md, g, s, grid});
+    ex_.mark(2);
     ex_.for_each(n, GhostCopyStage{md, g, s});
-    ex_.mark(4);
+    ex_.mark(3);
     // 5. forces
-    ex_.for_each(n, ForceStage{md, g, s, grid});
-    ex_.mark(5);
+    ex_.for_each_lanes(n, ForceStage{md, g, s, grid});
+    ex_.mark(4);
     // 6. reductions and the per-scene update
-    ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
-    ex_.mark(6);
     if (integrate) {
-      ex_.single(FinalizeStage{md, g});
-      ex_.mark(7);
-      ex_.for_each(n, IntegrateStage{md, g, s});
-      ex_.mark(8);
+      ex_.reduce_then(s.items, n, &g->sums, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
+      ex_.mark(5);
+      // 7. integrate, then key the next step
+      ex_.for_each(keys_items(m), IntegrateStage{md, g, s});
+      ex_.mark(6);
+    } else {
+      ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+      ex_.mark(5);
     }
   }
 
@@ -229,6 +242,7 @@ class SimImpl final : public Sim {
   Buf<uint32_t> cells_start_, cells_end_;
   int parity_ = 0;
   bool sorted_ = false;
+  bool keys_ready_ = false;  // the last step's integration keyed the current state
 };
 
 }  // namespace cps::m8
