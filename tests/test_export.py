@@ -199,3 +199,19 @@ def test_missing_h5py_names_the_pip_install(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "h5py", None)
     with pytest.raises(ExportError, match="pip install h5py"):
         export_run(tmp_path / "m8.cps", tmp_path / "out", format="vtkhdf")
+
+
+def test_2d_body_with_an_angle_becomes_a_rotated_quad(tmp_path):
+    from corpuscle.io import FrameWriter
+
+    hdr = viz_runs.tunnel_header() | {"bodies": [{"name": "plate", "shape": "box", "half_extents": [0.2, 0.02]}]}
+    with FrameWriter(tmp_path / "p.cps", hdr) as w:
+        w.write_frame(0, 0.0, 1e-3, {"position": np.zeros((3, 2), np.float32)},
+                      rigid={"plate": {"position": np.array([1.5, 0.5]), "orientation": np.array([np.pi / 2])}})
+    export_run(tmp_path / "p.cps", tmp_path / "out", progress=False)
+    m = meshio.read(tmp_path / "out" / "body_plate_00000.vtu")
+    assert [c.type for c in m.cells] == ["quad"] and len(m.points) == 4
+    lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+    np.testing.assert_allclose(lo[:2], [1.48, 0.3], atol=1e-9)
+    np.testing.assert_allclose(hi[:2], [1.52, 0.7], atol=1e-9)
+    np.testing.assert_allclose(m.cell_data["orientation"][0], np.pi / 2)

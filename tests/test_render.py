@@ -396,3 +396,15 @@ def test_live_render_takes_a_simulation_style_frame_dict(tmp_path):
     with LiveRender(tmp_path / "live.png", hdr, size=(64, 48)) as live:
         live.add_frame(SimpleNamespace(**rec, time=0.25, step=7))
     assert Image.open(tmp_path / "live.png").size == (64, 48)
+
+
+def test_2d_rigid_body_with_an_angle_is_drawn_rotated():
+    hdr = viz_runs.tunnel_header() | {"bodies": [{"name": "plate", "shape": "box", "half_extents": [0.2, 0.02]}]}
+    r = FrameRenderer(hdr, size=(400, 200), overlay=False, colorbar=False, color="none")
+    plate = {"position": np.array([1.5, 0.5]), "orientation": np.array([math.pi / 2])}
+    img = r.render(frame_of(np.array([[0.1, 0.1]]), rigid={"plate": plate}))
+    # turned a quarter: it now reaches 0.15 m up and only 0.02 m sideways
+    up = r.camera.project(np.array([[1.5, 0.65]]))[0, :2]
+    side = r.camera.project(np.array([[1.65, 0.5]]))[0, :2]
+    np.testing.assert_array_equal(img[int(up[1]), int(up[0])], render.DIE_RGB)
+    assert not np.array_equal(img[int(side[1]), int(side[0])], render.DIE_RGB)

@@ -101,8 +101,12 @@ def fit_2d(lo, hi, width: int, height: int, margin: float = 0.04) -> Camera:
 
 
 def quat_matrix(q) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = np.asarray(q, dtype=np.float64) / max(np.linalg.norm(q), 1e-300)
+    """Rotation matrix of an orientation: a quaternion (w, x, y, z), or in 2-D one angle about z."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1)
+    if q.size == 1:
+        c, s = math.cos(q[0]), math.sin(q[0])
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    w, x, y, z = q / max(np.linalg.norm(q), 1e-300)
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],

@@ -171,12 +171,14 @@ def prepare_dir(path: str | os.PathLike, error: type[ValueError]) -> Path:
 
 
 def run_stem(run: Any, default: str = "run") -> str:
-    """A file-name stem for outputs derived from a run (its file name, else its scene)."""
+    """A file-name stem for outputs derived from a run: its file name, else its scene."""
     path = getattr(run, "path", None)
     if path:
-        return Path(os.fspath(path)).name.split(".")[0] or default
-    scene = getattr(run, "header", {}).get("scene")
-    return re.sub(r"[^A-Za-z0-9_-]+", "_", str(scene)) if scene else default
+        stem = Path(os.fspath(path)).name.split(".")[0]
+        if stem:
+            return stem
+    name = scene_info(getattr(run, "header", None))["name"]
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", name) if name else default
 
 
 def _find_key(obj: Any, key: str) -> Any:

@@ -21,7 +21,6 @@ Python API::
 from __future__ import annotations
 
 import argparse
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
@@ -29,7 +28,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ._camera import quat_matrix
-from ._viz_common import open_run, parse_frames, prepare_dir, require, scene_info
+from ._viz_common import open_run, parse_frames, prepare_dir, require, run_stem, scene_info
 
 
 class ExportError(ValueError):
@@ -104,7 +103,13 @@ def _body_part(name: str, spec: dict, state: dict, dim: int) -> Part:
     rot = quat_matrix(state.get("orientation", [1, 0, 0, 0]))
     shape = spec.get("shape", "box" if "half_extents" in spec else None)
     faces_spec = spec.get("faces") or {}
-    if shape == "box" and "half_extents" in spec:
+    if shape == "box" and "half_extents" in spec and dim == 2:
+        # a rectangle in the plane: one quad
+        hx, hy = np.asarray(spec["half_extents"], float).reshape(-1)[:2]
+        corners = np.array([[-hx, -hy, 0.0], [hx, -hy, 0.0], [hx, hy, 0.0], [-hx, hy, 0.0]])
+        part = Part(name, pos + corners @ rot.T, np.arange(4, dtype=np.int64), np.array([4], np.int64),
+                    np.array([VTK_QUAD], np.uint8))
+    elif shape == "box" and "half_extents" in spec:
         he = np.zeros(3)
         h = np.asarray(spec["half_extents"], float).reshape(-1)[:3]
         he[: len(h)] = h
@@ -440,11 +445,10 @@ def export_run(run, out_dir, *, format: str = "vtk", frames=None, progress: bool
     """
     if format not in FORMATS:
         raise ExportError(f"unknown --format '{format}': choose {' or '.join(FORMATS)}")
-    path = None if hasattr(run, "header") else Path(os.fspath(run))
     run = open_run(run, ExportError)
     indices = parse_frames(frames, len(run), ExportError)
     out = prepare_dir(out_dir, ExportError)
-    stem = (path.name.split(".")[0] if path is not None else "") or scene_info(run.header)["name"] or "run"
+    stem = run_stem(run)
     from tqdm import tqdm
 
     try:
