@@ -224,16 +224,13 @@ class FrameRenderer:
         self.scene = _scene(self.header, dim)
         if dim == 2 and self.camera_request is not None:
             raise RenderError("--camera applies to 3-D scenes; this run is 2-D")
-        w, h = self.size
-        self.panel = _overlay.colorbar_width(h) if self.colorbar else 0
         self._resolve_color(frame)
-        if not self.colorbar or self.field is None:
-            self.panel = 0
+        self.panel = _overlay.colorbar_width(self.size[1]) if self.colorbar and self.field is not None else 0
         self._choose_camera(frame)
         self._background = self._make_background()
         self._ready = True
         if self.field is not None and self.value_range is None and self._samples:
-            self._grow_range(np.concatenate([self._sample_values(f) for f in self._samples]))
+            self._grow_range(np.concatenate([self._sample_values(self._values(f)) for f in self._samples]))
         self._samples = []
 
     def _per_particle_fields(self, frame) -> dict[str, np.ndarray]:
@@ -283,20 +280,17 @@ class FrameRenderer:
         v = np.ascontiguousarray(v, dtype=np.float32)
         return v.reshape(-1, 1) if v.ndim == 1 else v
 
-    def _sample_values(self, frame, limit: int = 200_000) -> np.ndarray:
-        """Transformed values of a frame (every k-th particle, at most ``limit``)."""
-        v = self._values(frame)
-        if v is None:
-            return np.zeros(0)
+    def _sample_values(self, v: np.ndarray, limit: int = 200_000) -> np.ndarray:
+        """Transformed, finite values of every k-th particle (at most ``limit``) of a colouring array."""
         v = v[:: max(1, len(v) // limit)]
         v = v[:, 0] if v.shape[1] == 1 else np.linalg.norm(v, axis=1)
         t = _colors.transform(v, self.log)
         return t[np.isfinite(t)]
 
-    def _grow_range(self, t: np.ndarray) -> bool:
-        """Widen the colour range to the robust percentiles of ``t``; True when it changed."""
+    def _grow_range(self, t: np.ndarray) -> None:
+        """Widen the colour range to cover the robust percentiles of ``t`` (transformed values)."""
         if self.value_range is not None or t.size == 0:
-            return False
+            return
         lo, hi = (float(x) for x in np.percentile(t, ROBUST_PERCENTILES))
         if self._trange is not None:
             lo, hi = min(lo, self._trange[0]), max(hi, self._trange[1])
@@ -304,9 +298,7 @@ class FrameRenderer:
             # a uniform field: centre it (all zero: show 0..1)
             pad = 0.05 * abs(lo)
             lo, hi = (0.0, 1.0) if pad == 0 else (lo - pad, hi + pad)
-        changed = self._trange != (lo, hi)
         self._trange = (lo, hi)
-        return changed
 
     @property
     def color_range(self) -> tuple[float, float] | None:
@@ -385,7 +377,7 @@ class FrameRenderer:
             raise RenderError(f"'position' must have shape (n, 2) or (n, 3), got {pos.shape}")
         values = self._values(frame)
         if values is not None and self.value_range is None:
-            self._grow_range(self._sample_values(frame))
+            self._grow_range(self._sample_values(values))
         lo, hi = self._trange if self._trange is not None else (0.0, 1.0)
         sphere = self.dim == 3
         clip = self._clip_depth(frame)
@@ -406,7 +398,7 @@ class FrameRenderer:
             self._draw_scene_2d(img, frame)
         if self.overlay:
             self._draw_overlay(img, frame)
-        if self.panel and self.field is not None:
+        if self.panel:
             _overlay.draw_colorbar(img, self.lut, lo, hi, self.log, self.label)
         return img
 
