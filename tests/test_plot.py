@@ -77,9 +77,7 @@ def test_cli_plot(tmp_path, capsys):
 def test_bad_input_gives_one_line_and_exit_code_2(tmp_path, capsys, argv, words):
     viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=2)
     rc = main([a.format(d=tmp_path) for a in argv])
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and len(lines) == 1 and lines[0].startswith("corpuscle: error: ")
-    assert words in lines[0]
+    viz_runs.assert_usage_error(rc, capsys.readouterr().err, words)
 
 
 def test_missing_matplotlib_names_the_pip_install(tmp_path, monkeypatch):

@@ -355,11 +355,7 @@ def runs(tmp_path):
 def test_bad_input_gives_one_line_and_exit_code_2(runs, capsys, argv, words):
     (runs / "notarun.cps").write_bytes(b"hello, not a frame stream" * 10)
     rc = main([a.format(d=runs) for a in argv])
-    err = capsys.readouterr().err
-    assert rc == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("corpuscle: error: "), err
-    assert words in lines[0]
+    viz_runs.assert_usage_error(rc, capsys.readouterr().err, words)
 
 
 def test_errors_are_value_errors_for_the_cli_table():
