@@ -461,7 +461,8 @@ def export_run(run, out_dir, *, format: str = "vtk", frames=None, progress: bool
         raise ExportError(f"cannot write into {out}: {exc.strerror or exc}") from None
 
 
-def _cmd(args: argparse.Namespace) -> int:
+def run_command(args: argparse.Namespace) -> int:
+    """Run ``corpuscle export`` from parsed arguments; returns the exit code."""
     path = export_run(args.run, args.output, format=args.format, frames=args.frames,
                       progress=False if args.quiet else None)
     if not args.quiet:
@@ -469,15 +470,24 @@ def _cmd(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``corpuscle export RUN --format vtk|vtkhdf DIR`` on an argparse subparsers object."""
-    p = subparsers.add_parser("export", help="export a recorded run for ParaView (VTK or VTKHDF)",
-                              description="Export a recorded run as ParaView-readable files: a .vtu per frame and "
-                                          "part plus a .pvd series (vtk), or one .vtkhdf file (vtkhdf).")
+# one-line help and description of the subcommand (for a command table such as corpuscle.cli's)
+HELP = "export a recorded run for ParaView (VTK or VTKHDF)"
+DESCRIPTION = ("Export a recorded run as ParaView-readable files: a .vtu per frame and "
+               "part plus a .pvd series (vtk), or one .vtkhdf file (vtkhdf).")
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    """Add ``corpuscle export``'s arguments to a (sub)parser."""
     p.add_argument("run", metavar="RUN", help="recorded run (frame stream file)")
     p.add_argument("output", metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--format", default="vtk", metavar="vtk|vtkhdf", help="vtk (default) or vtkhdf")
     p.add_argument("--frames", metavar="A:B[:STEP]", help="frames to export (Python slice; default all)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
-    p.set_defaults(func=_cmd)
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``corpuscle export`` on an argparse subparsers object (handler in ``func``)."""
+    p = subparsers.add_parser("export", help=HELP, description=DESCRIPTION)
+    configure_parser(p)
+    p.set_defaults(func=run_command)
     return p

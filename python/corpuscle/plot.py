@@ -148,7 +148,8 @@ def plot_run(run, out=None, *, series: list[str] | str | None = None, width: flo
     return fig
 
 
-def _cmd(args: argparse.Namespace) -> int:
+def run_command(args: argparse.Namespace) -> int:
+    """Run ``corpuscle plot`` from parsed arguments; returns the exit code."""
     try:
         dpi = int(args.dpi)
     except ValueError:
@@ -158,13 +159,22 @@ def _cmd(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``corpuscle plot RUN -o OUT.png`` on an argparse subparsers object."""
-    p = subparsers.add_parser("plot", help="plot the time series a run recorded",
-                              description="Plot a recorded run's time series (dt, energies, errors, forces, counts).")
+# one-line help and description of the subcommand (for a command table such as corpuscle.cli's)
+HELP = "plot the time series a run recorded"
+DESCRIPTION = "Plot a recorded run's time series (dt, energies, errors, forces, counts)."
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    """Add ``corpuscle plot``'s arguments to a (sub)parser."""
     p.add_argument("run", metavar="RUN", help="recorded run (frame stream file)")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output picture: .png, .pdf or .svg")
     p.add_argument("--series", metavar="A,B,...", help="series to plot (default: every one the run has)")
     p.add_argument("--dpi", default=110, metavar="DPI", help="resolution of a .png (default 110)")
-    p.set_defaults(func=_cmd)
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``corpuscle plot`` on an argparse subparsers object (handler in ``func``)."""
+    p = subparsers.add_parser("plot", help=HELP, description=DESCRIPTION)
+    configure_parser(p)
+    p.set_defaults(func=run_command)
     return p

@@ -610,12 +610,18 @@ class LiveRender:
     def add_frame(self, frame) -> np.ndarray:
         """Render ``frame`` and append it to the output; returns the picture."""
         img = self.renderer.render(frame)
-        self.sink.add(img)
+        try:
+            self.sink.add(img)
+        except OSError as exc:
+            raise RenderError(f"cannot write {self.sink.path}: {exc.strerror or str(exc).splitlines()[0]}") from None
         return img
 
     def close(self) -> None:
         """Finish the output file."""
-        self.sink.close()
+        try:
+            self.sink.close()
+        except OSError as exc:
+            raise RenderError(f"cannot write {self.sink.path}: {exc.strerror or str(exc).splitlines()[0]}") from None
 
     def __enter__(self):
         return self
@@ -697,7 +703,8 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
 # ---- command line --------------------------------------------------------------------------
 
 
-def _cmd(args: argparse.Namespace) -> int:
+def run_command(args: argparse.Namespace) -> int:
+    """Run ``corpuscle render`` from parsed arguments; returns the exit code."""
     res = render_run(args.run, args.output, frames=args.frames, frame=args.frame, size=args.size, fps=args.fps,
                      color=args.color, value_range=args.range, log=args.log, ramp=args.ramp, camera=args.camera,
                      ghosts=args.ghosts, cutaway=args.cutaway, overlay=not args.no_overlay, colorbar=not args.no_colorbar,
@@ -707,12 +714,14 @@ def _cmd(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``corpuscle render RUN -o OUT`` on an argparse subparsers object."""
-    p = subparsers.add_parser(
-        "render", help="render a recorded run to a video, GIF, PNG or PNG frames",
-        description="Render a recorded run. OUT decides the output: .mp4 (H.264), .gif, .png (one frame) "
-                    "or a directory of numbered PNGs.")
+# one-line help and description of the subcommand (for a command table such as corpuscle.cli's)
+HELP = "render a recorded run to a video, GIF, PNG or PNG frames"
+DESCRIPTION = ("Render a recorded run. OUT decides the output: .mp4 (H.264), .gif, .png (one frame) "
+               "or a directory of numbered PNGs.")
+
+
+def configure_parser(p: argparse.ArgumentParser) -> None:
+    """Add ``corpuscle render``'s arguments to a (sub)parser."""
     p.add_argument("run", metavar="RUN", help="recorded run (frame stream file)")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output: .mp4, .gif, .png or a directory")
     p.add_argument("--frame", metavar="I", help="frame of a .png output (default: the last; negatives count from the end)")
@@ -736,5 +745,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--no-overlay", action="store_true", help="leave out the time/step text")
     p.add_argument("--no-colorbar", action="store_true", help="leave out the colour bar")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
-    p.set_defaults(func=_cmd)
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``corpuscle render`` on an argparse subparsers object (handler in ``func``)."""
+    p = subparsers.add_parser("render", help=HELP, description=DESCRIPTION)
+    configure_parser(p)
+    p.set_defaults(func=run_command)
     return p
