@@ -213,3 +213,23 @@ def test_2d_body_with_an_angle_becomes_a_rotated_quad(tmp_path):
     np.testing.assert_allclose(lo[:2], [1.48, 0.3], atol=1e-9)
     np.testing.assert_allclose(hi[:2], [1.52, 0.7], atol=1e-9)
     np.testing.assert_allclose(m.cell_data["orientation"][0], np.pi / 2)
+
+
+def test_sphere_body_becomes_a_closed_sphere_mesh(tmp_path):
+    from corpuscle.io import FrameWriter
+
+    hdr = viz_runs.magic8ball_header() | {"bodies": [{"name": "ball", "shape": "sphere", "radius": 0.02}]}
+    with FrameWriter(tmp_path / "b.cps", hdr) as w:
+        w.write_frame(0, 0.0, 1e-3, {"position": np.zeros((2, 3), np.float32)},
+                      rigid={"ball": {"position": np.array([0.01, 0.0, -0.03]), "orientation": np.array([1.0, 0, 0, 0])}})
+    export_run(tmp_path / "b.cps", tmp_path / "out", progress=False)
+    m = meshio.read(tmp_path / "out" / "body_ball_00000.vtu")
+    np.testing.assert_allclose(np.linalg.norm(m.points - [0.01, 0.0, -0.03], axis=1), 0.02)
+    # every edge is shared by exactly two faces: a closed surface
+    edges = {}
+    for block in m.cells:
+        for cell in block.data:
+            for a, b in zip(cell, np.roll(cell, -1)):
+                key = (min(a, b), max(a, b))
+                edges[key] = edges.get(key, 0) + 1
+    assert set(edges.values()) == {2}

@@ -54,12 +54,11 @@ class Part:
     name: str
     points: np.ndarray  # (n, 3)
     connectivity: np.ndarray  # int64
-    offsets: np.ndarray  # int64, (cells,) end offsets (XML) -- see vtk_offsets
+    offsets: np.ndarray  # int64, (cells,): where each cell's point ids end in connectivity
     types: np.ndarray  # uint8 (cells,)
     point_data: dict = field(default_factory=dict)
     cell_data: dict = field(default_factory=dict)
     field_data: dict = field(default_factory=dict)
-    static: bool = False  # the same in every frame (obstacles)
 
 
 # ---- frames -> parts ------------------------------------------------------------------------
@@ -174,7 +173,7 @@ def _obstacle_part(ob: dict, k: int) -> Part | None:
     p = _pad3(np.asarray(pts, float)[:, :3])
     n = len(p)
     return Part(f"obstacle_{ob.get('name', k)}", p, np.arange(n, dtype=np.int64), np.array([n], np.int64),
-                np.array([VTK_POLYGON], np.uint8), static=True)
+                np.array([VTK_POLYGON], np.uint8))
 
 
 def _group_position(fields: dict, groups: dict, group: str) -> str | None:
