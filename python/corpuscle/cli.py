@@ -296,6 +296,9 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
     p.add_argument("--velocity", action="store_true", help="also record particle velocities")
     p.add_argument("--json", action="store_true", help="print only one JSON summary object on stdout")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from . import render  # light: heavy imaging libraries load only when rendering
+
+    render.add_live_render_arguments(p)
 
 
 def _run_prepare(args: argparse.Namespace):
@@ -373,6 +376,23 @@ def _run_header(scene, sim, backend: str, every: int, args: argparse.Namespace) 
     return header
 
 
+def _live_render(args: argparse.Namespace, header: dict[str, Any]):
+    """The `--render OUT` sink, or None."""
+    if not getattr(args, "render", None):
+        return None
+    from . import render
+    return render.LiveRender.from_args(args, header)
+
+
+def _record(writer, sim, args: argparse.Namespace, live) -> None:
+    """Write one frame (and render it when `--render` asked for that)."""
+    rec = sim.frame(ghosts=args.ghosts or bool(getattr(args, "render_ghosts", False)), velocity=args.velocity)
+    writer.write_frame(sim.steps, sim.time, sim.dt, **rec)
+    if live is not None:
+        from types import SimpleNamespace
+        live.add_frame(SimpleNamespace(**rec, time=sim.time, step=sim.steps))
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     # validate everything cheap first; the core is imported only after this
     scene, budget, out = _run_prepare(args)
@@ -382,8 +402,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     # initialisation (not timed)
     sim = simulation.Simulation.from_scene(scene, backend=args.backend)
+    if hasattr(sim, "set_end_time"):
+        sim.set_end_time(sim.end_time)  # the core shortens the last step to land on it
     backend = str(getattr(sim, "backend", args.backend))
     header = _run_header(scene, sim, backend, every, args)
+    live = _live_render(args, header)
     try:
         writer = io.FrameWriter(out, header)
     except OSError as exc:
@@ -396,7 +419,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     progress = _Progress(_progress_enabled(args), budget, float(sim.end_time))
     with writer:
         # the first frame, then the clock starts
-        writer.write_frame(sim.steps, sim.time, sim.dt, **sim.frame(ghosts=args.ghosts, velocity=args.velocity))
+        _record(writer, sim, args, live)
         frames += 1
         t0 = time.perf_counter()
         try:
@@ -410,9 +433,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 sim.step(k)
                 if int(sim.steps) <= before:
                     raise RuntimeError(f"Simulation.step({k}) did not advance (still at step {before})")
-                writer.write_frame(
-                    sim.steps, sim.time, sim.dt, **sim.frame(ghosts=args.ghosts, velocity=args.velocity)
-                )
+                _record(writer, sim, args, live)
                 frames += 1
                 progress.update(int(sim.steps) - start_steps, float(sim.time), time.perf_counter() - t0)
                 message = sim.check_health()
@@ -424,6 +445,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         finally:
             wall = time.perf_counter() - t0
             progress.close()
+            if live is not None:
+                live.close()
     # the writer is closed here, so every recorded frame is readable
 
     steps = int(sim.steps) - start_steps
@@ -618,6 +641,17 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
 
 
 register(Command("bench", "time steps per second on each backend", _configure_bench, _cmd_bench))
+
+
+def _register_viz() -> None:
+    """render / plot / export (issue 3): their modules import heavy libraries lazily."""
+    from . import export, plot, render
+
+    for name, mod in (("render", render), ("plot", plot), ("export", export)):
+        register(Command(name, mod.HELP, mod.configure_parser, mod.run_command, mod.DESCRIPTION))
+
+
+_register_viz()
 
 
 # ---------------------------------------------------------------------------
