@@ -168,7 +168,7 @@ def test_run_options_reach_the_scene(fakes, capsys):
     writer = FakeWriter.instances[0]
     assert str(writer.path) == "x.cps"
     assert set(writer.frames[0]["fields"]) == {"position", "velocity", "ghost_position"}
-    assert writer.header["scene"]["fluid"]["particles"] == 5000
+    assert writer.header["parameters"]["fluid"]["particles"] == 5000
     assert writer.header["backend"] == "cpu"
 
 
