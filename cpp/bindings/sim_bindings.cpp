@@ -161,7 +161,7 @@ void bind_sim(nb::module_& m) {
              d["dt"] = g.dt;
              d["n_ghost"] = g.n_ghost;
              d["done"] = bool(g.done);
-             d["bad"] = bool(g.bad);
+             d["bad"] = g.bad;
              d["bad_step"] = g.bad_step;
              d["die"] = die_to(g.die);
              d["shell_orientation"] = std::array<float, 4>{g.shell_q.w, g.shell_q.x, g.shell_q.y, g.shell_q.z};

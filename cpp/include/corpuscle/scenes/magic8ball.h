@@ -77,6 +77,11 @@ struct SumsOp {
   CPS_HD StepSums operator()(const StepSums& a, const StepSums& b) const { return StepSums::combine(a, b); }
 };
 
+// reasons a run is stopped as unstable
+constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
+constexpr int kBadDie = 2;        // the die's state went non-finite
+constexpr int kBadSpeed = 3;      // a speed passed 100 times the sound speed
+
 // per-scene mutable scalars
 struct Globals {
   double time;
@@ -85,7 +90,7 @@ struct Globals {
   float dt;              // the dt of the last step
   int n_ghost;
   int done;              // end_time reached
-  int bad;               // 1 once a particle went non-finite or far outside
+  int bad;               // why the run is unsound (kBad*), 0 while it is sound
   long long bad_step;
   RigidState die;
   Quat shell_q;          // container orientation (container -> lab)
@@ -303,10 +308,15 @@ struct FinalizeStage {
     float nu = m.sph.viscosity / m.sph.rest_density;
     float dt = choose_dt(m.dt, m.h, vmax, fsqrt(G.sums.amax2), m.c0, nu);
     if (G.time + double(dt) > G.end_time) dt = float(G.end_time - G.time);
-    if (!finite(G.sums.vmax2) || !finite(G.sums.amax2)) G.bad = 1;
+    if (!finite(G.sums.vmax2) || !finite(G.sums.amax2)) G.bad = kBadParticles;
+    else if (vmax > 100.0f * m.c0) G.bad = kBadSpeed;
     // the die under the fluid's reaction, then kept inside the sphere
     integrate_box(m.die, m.body, G.frame, G.sums.force, G.sums.torque, dt, G.die);
     keep_box_in_sphere(m.die, m.wall.radius, m.body.restitution, G.die);
+    const RigidState& d = G.die;
+    if (!finite(d.x[0] + d.x[1] + d.x[2] + d.v[0] + d.v[1] + d.v[2] + d.q.w + d.q.x + d.q.y + d.q.z +
+                d.w_body[0] + d.w_body[1] + d.w_body[2]))
+      G.bad = kBadDie;
     // the container shell: angular velocity and orientation
     G.shell_omega += G.frame.alpha * dt;
     G.shell_q = qintegrate_body(G.shell_q, G.shell_omega, dt);
