@@ -115,8 +115,6 @@ def test_different_seeds_different_starts():
     np.testing.assert_array_equal(pa, make("cpu", seed=1).field("position", copy=True))
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: Magic8Ball.view (cpp/bindings/sim_bindings.cpp:224) returns a bare "
-                   "nb::ndarray<> (a DLPack PyCapsule), not the NumPy view Simulation.field documents")
 def test_cpu_field_view_is_numpy():
     # field(name) without copy: a zero-copy NumPy view on the CPU (Simulation.field docstring)
     sim = make("cpu", particles=200)
@@ -241,8 +239,6 @@ def test_cuda_run_stays_close_to_cpu_statistically():
 
 @pytest.mark.gpu
 @requires_cuda
-@pytest.mark.xfail(strict=True, reason="core bug: Magic8Ball.view (cpp/bindings/sim_bindings.cpp:224) returns a bare "
-                   "nb::ndarray<> (a DLPack PyCapsule), which has no __dlpack__")
 def test_cuda_field_exposes_dlpack():
     sim = make("cuda", particles=500)
     sim.step(2)

@@ -195,9 +195,6 @@ def test_run_until_stops_at_end_time():
         np.testing.assert_array_equal(sim.field("position", copy=True), before[2])
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: FinalizeStage (cpp/include/corpuscle/scenes/magic8ball.h:310,324 at e18eb7a) "
-                   "clips the last dt to float(end_time - time) and adds it back, so the clock lands on T only when "
-                   "that remainder is a float32: run(until=1/3) ends at 0.33333333334303 (+9.7e-12)")
 def test_run_until_ends_exactly_at_T():
     # Simulation.run documents "exactly: the last dt is shortened"
     missed = []

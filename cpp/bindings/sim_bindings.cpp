@@ -220,8 +220,12 @@ void bind_sim(nb::module_& m) {
              Field f = field_of(name);
              auto [ptr, count] = s.sim->view(f);
              size_t shape[2] = {size_t(count), 3};
-             int dev = s.sim->on_device() ? nb::device::cuda::value : nb::device::cpu::value;
-             return nb::ndarray<>(ptr, is_vector(f) ? 2 : 1, shape, self, nullptr, dtype_of(f), dev, 0);
+             int ndim = is_vector(f) ? 2 : 1;
+             // host memory: a NumPy array; device memory: an array exposing __dlpack__
+             if (!s.sim->on_device())
+               return nb::cast(nb::ndarray<nb::numpy>(ptr, ndim, shape, self, nullptr, dtype_of(f)));
+             return nb::cast(nb::ndarray<nb::array_api>(ptr, ndim, shape, self, nullptr, dtype_of(f),
+                                                        nb::device::cuda::value, 0));
            }, nb::arg("name"),
            "A zero-copy view of a field (host memory, or device memory through DLPack); valid until the next step.")
       .def("bench", [](PySim& s, long long n) {

@@ -307,7 +307,8 @@ struct FinalizeStage {
     float vmax = fmax2(fsqrt(G.sums.vmax2), vdie);
     float nu = m.sph.viscosity / m.sph.rest_density;
     float dt = choose_dt(m.dt, m.h, vmax, fsqrt(G.sums.amax2), m.c0, nu);
-    if (G.time + double(dt) > G.end_time) dt = float(G.end_time - G.time);
+    const bool last = G.time + double(dt) >= G.end_time;
+    if (last) dt = float(G.end_time - G.time);
     if (!finite(G.sums.vmax2) || !finite(G.sums.amax2)) G.bad = kBadParticles;
     else if (vmax > 100.0f * m.c0) G.bad = kBadSpeed;
     // the die under the fluid's reaction, then kept inside the sphere
@@ -321,7 +322,7 @@ struct FinalizeStage {
     G.shell_omega += G.frame.alpha * dt;
     G.shell_q = qintegrate_body(G.shell_q, G.shell_omega, dt);
     G.dt = dt;
-    G.time += double(dt);
+    G.time = last ? G.end_time : G.time + double(dt);  // land exactly on the end time
     G.step += 1;
     if (G.bad && G.bad_step < 0) G.bad_step = G.step;
   }
