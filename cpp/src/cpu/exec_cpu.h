@@ -77,6 +77,13 @@ struct CpuExec {
     });
   }
 
+  // sort, then run a stage over the n sorted slots
+  template <class F>
+  void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const F& f) {
+    sort_pairs(kin, kout, vin, vout, n, bits);
+    for_each(n, f);
+  }
+
   // reduce in[0, n) with op into *out, in a fixed order independent of thread count
   template <class T, class Op>
   void reduce(const T* in, int n, T* out, Op op, T init) const {

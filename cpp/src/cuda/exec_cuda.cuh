@@ -57,9 +57,9 @@ __global__ void __launch_bounds__(kThreads) k_reduce_block_then(const T* in, int
 
 // CUB's block radix sort for inputs that fit one block (stable, like the device sort);
 // slots past n are padded with all-ones keys, which sort last
-template <int kThreads, int kItems>
-__global__ void __launch_bounds__(kThreads) k_block_sort(const uint32_t* kin, uint32_t* kout, const int* vin,
-                                                         int* vout, int n, int bits) {
+template <int kThreads, int kItems, class F>
+__global__ void __launch_bounds__(kThreads) k_block_sort_then(const uint32_t* kin, uint32_t* kout, const int* vin,
+                                                              int* vout, int n, int bits, F f) {
   using Sort = cub::BlockRadixSort<uint32_t, kThreads, kItems, int>;
   __shared__ typename Sort::TempStorage tmp;
   uint32_t k[kItems];
@@ -77,6 +77,9 @@ __global__ void __launch_bounds__(kThreads) k_block_sort(const uint32_t* kin, ui
       vout[idx] = v[t];
     }
   }
+  // the stage that reads the sorted pairs, in the same block
+  __syncthreads();
+  for (int j = int(threadIdx.x); j < n; j += kThreads) f(j);
 }
 
 struct CudaExec {
@@ -149,14 +152,21 @@ struct CudaExec {
     CPS_CUDA_LAUNCH_CHECK();
   }
 
-  // CUB's stable LSD radix sort over the key bits in use: one block when it fits
-  static constexpr int kSortThreads = 512, kSortItems = 16;
-  void sort_pairs(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits) {
+  // CUB's stable LSD radix sort over the key bits in use, then a stage over the sorted
+  // slots: for inputs that fit one block, both in one CUB block-sort kernel
+  static constexpr int kSortThreads = 1024, kSortItems = 8;
+  template <class F>
+  void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const F& f) {
     if (n <= kSortThreads * kSortItems) {
-      k_block_sort<kSortThreads, kSortItems><<<1, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, n, bits);
+      k_block_sort_then<kSortThreads, kSortItems><<<1, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, n, bits, f);
       CPS_CUDA_LAUNCH_CHECK();
       return;
     }
+    sort_pairs(kin, kout, vin, vout, n, bits);
+    for_each(n, f);
+  }
+
+  void sort_pairs(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits) {
     size_t bytes = 0;
     CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
     ensure_temp(bytes);

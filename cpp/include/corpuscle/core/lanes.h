@@ -2,7 +2,7 @@
 // runs one lane per item; CUDA runs a warp per item so neighbour loads are coalesced and
 // small particle counts still fill the GPU. A functor written against `Lanes` works for both.
 #pragma once
-#include "corpuscle/core/vec.h"
+#include "corpuscle/spatial/grid.h"
 
 namespace cps {
 
@@ -14,6 +14,11 @@ struct SingleLane {
   template <int D>
   CPS_HD Vec<D> sum(const Vec<D>& v) const { return v; }
   CPS_HD bool leader() const { return true; }
+  // the plain cell-by-cell neighbour loop
+  template <int D, class Visitor>
+  CPS_HD void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) const {
+    cps::for_each_neighbor(g, xi, ghosts, visit);
+  }
 };
 
 #ifdef __CUDACC__
@@ -32,6 +37,50 @@ struct WarpLanes {
     return v;
   }
   __device__ bool leader() const { return lane() == 0; }
+
+  // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
+  // (lane l: slots l and l + 32), then walk the cells with the ranges broadcast by shuffles,
+  // each lane taking every 32nd candidate; no load waits on another cell's range
+  template <int D, class Visitor>
+  __device__ void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) const {
+    constexpr int kStencil = D == 3 ? 27 : 9;
+    const int nslots = kStencil * (ghosts ? 2 : 1);
+    const int l = lane();
+    int c[D];
+    g.spec.cell_of(xi, c);
+    uint32_t s0 = 0, e0 = 0, s1 = 0, e1 = 0;
+    load_range(g, c, l, nslots, s0, e0);
+    load_range(g, c, l + 32, nslots, s1, e1);
+    for (int k = 0; k < nslots; ++k) {
+      uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
+      uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
+      for (uint32_t j = s + uint32_t(l); j < e; j += 32u) {
+        Vec<D> d = xi - g.pos[j];
+        float r2 = norm2(d);
+        if (r2 < g.spec.h2) visit(int(j), d, r2);
+      }
+    }
+  }
+
+ private:
+  // cell range of stencil slot k (layer k / stencil, offset k % stencil), empty outside the grid
+  template <int D>
+  __device__ static void load_range(const GridView<D>& g, const int* c, int k, int nslots, uint32_t& s, uint32_t& e) {
+    constexpr int kStencil = D == 3 ? 27 : 9;
+    if (k >= nslots) return;
+    int t = k % kStencil;
+    int cc[D];
+    bool inside = true;
+    for (int a = 0; a < D; ++a) {
+      cc[a] = c[a] + (t % 3) - 1;
+      t /= 3;
+      inside = inside && cc[a] >= 0 && cc[a] < g.spec.dims;
+    }
+    if (!inside) return;
+    uint32_t slot = morton_encode<D>(cc) + uint32_t(k / kStencil) * g.spec.ncells;
+    s = g.cell_start[slot];
+    e = g.cell_end[slot];
+  }
 };
 #endif
 

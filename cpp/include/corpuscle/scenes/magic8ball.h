@@ -107,8 +107,7 @@ struct Arrays {
   int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
   uint32_t *keys, *keys_sorted;
   int *idx, *perm;
-  int *inv;              // fluid original index -> sorted slot
-  int *src;              // ghost slot -> original index of its fluid particle
+  int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
   Vec3 *acc, *xsph;
   StepSums* items;
   uint32_t *cell_start, *cell_end;
@@ -168,7 +167,10 @@ CPS_HD CPS_INLINE void start_step(const Model& m, Globals* g, const Arrays& a, i
     a.cell_start[i] = 0u;
     a.cell_end[i] = 0u;
   }
-  if (i < m.n_fluid) write_keys(m, a, i, *x);
+  if (i < m.n_fluid) {
+    write_keys(m, a, i, *x);
+    a.ghost_of[i] = -1;
+  }
   if (i == 0) prepare_frame(m, *g);
 }
 
@@ -200,20 +202,20 @@ struct ReorderStage {
       a.pos_alt[j] = a.pos[o];
       a.vel_alt[j] = a.vel[o];
       a.id_alt[j] = a.id[o];
-      a.inv[o] = j;
     } else {
       int f = o - n;
       Vec3 x = a.pos[f];
       a.pos_alt[j] = mirror_position(m.wall, x);
       a.vel_alt[j] = mirror_velocity(x, a.vel[f]);
       a.id_alt[j] = -1;
-      a.src[j] = f;
+      a.ghost_of[f] = j;
     }
     if (j + 1 == cap || a.keys_sorted[j + 1] >= sentinel) g->n_ghost = j + 1 - n;
   }
 };
 
-// stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles.
+// stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles,
+// copied to each particle's ghost.
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (the die face taken as a plane), as if mirrored fluid filled the die, so
 // the pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
@@ -227,27 +229,20 @@ struct DensityStage {
     const Model& m = *model;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    for_each_neighbor(grid, x, true, v, L.lane(), L.count());
+    L.for_each_neighbor(grid, x, true, v);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
     float cut = m.kern.poly6_beyond_plane(body_distance(m.die, g->die, x));
     float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
+    float p = tait_pressure(m.sph, rho);
     a.rho[i] = rho;
-    a.prs[i] = tait_pressure(m.sph, rho);
-  }
-};
-
-// stage 4: ghosts take the density and pressure of their fluid particle
-struct GhostCopyStage {
-  const Model* model;
-  const Globals* g;
-  Arrays a;
-  CPS_HD void operator()(int k) const {
-    const int j = model->n_fluid + k;
-    if (k >= g->n_ghost) return;
-    int f = a.inv[a.src[j]];
-    a.rho[j] = a.rho[f];
-    a.prs[j] = a.prs[f];
+    a.prs[i] = p;
+    // the ghost of this particle carries the same density and pressure
+    int gs = a.ghost_of[a.perm[i]];
+    if (gs >= 0) {
+      a.rho[gs] = rho;
+      a.prs[gs] = p;
+    }
   }
 };
 
@@ -263,7 +258,7 @@ struct ForceStage {
     const Model& m = *model;
     ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
     Vec3 x = a.pos[i];
-    for_each_neighbor(grid, x, true, fv, L.lane(), L.count());
+    L.for_each_neighbor(grid, x, true, fv);
     fv.reduce(L);
     if (!L.leader()) return;
     Vec3 v = a.vel[i];

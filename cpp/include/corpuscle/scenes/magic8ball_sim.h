@@ -10,9 +10,9 @@
 namespace cps::m8 {
 
 // names of the pipeline stages, in order (for profiles)
-inline const char* const kStageNames[] = {"sort", "reorder", "density", "ghosts",
-                                          "forces", "reduce+finalize", "integrate+keys"};
-constexpr int kNumStages = 7;
+inline const char* const kStageNames[] = {"sort+reorder", "density", "forces", "reduce+finalize",
+                                          "integrate+keys"};
+constexpr int kNumStages = 5;
 
 template <class Exec>
 class SimImpl final : public Sim {
@@ -36,8 +36,7 @@ class SimImpl final : public Sim {
     keys_sorted_.resize(cap);
     idx_.resize(cap);
     perm_.resize(cap);
-    inv_.resize(n);
-    src_.resize(cap);
+    ghost_of_.resize(n);
     acc_.resize(n);
     xsph_.resize(n);
     items_.resize(n);
@@ -174,33 +173,28 @@ class SimImpl final : public Sim {
     Globals* g = g_.data();
     Arrays a = arrays(cur, nxt);
     // 1. keys come from the last step's integration (or ensure_keys)
-    // 2. sort by key
-    ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits());
+    // 2. sort by key, then reorder into the other buffers (ghosts built there, cell ranges)
+    ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), ReorderStage{md, g, a});
     ex_.mark(0);
-    // 3. reorder into the other buffers, ghosts built there, cell ranges
-    ex_.for_each(cap, ReorderStage{md, g, a});
-    ex_.mark(1);
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
     GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
     // 4. density and pressure
     ex_.for_each_lanes(n, DensityStage{md, g, s, grid});
-    ex_.mark(2);
-    ex_.for_each(n, GhostCopyStage{md, g, s});
-    ex_.mark(3);
+    ex_.mark(1);
     // 5. forces
     ex_.for_each_lanes(n, ForceStage{md, g, s, grid});
-    ex_.mark(4);
+    ex_.mark(2);
     // 6. reductions and the per-scene update
     if (integrate) {
       ex_.reduce_then(s.items, n, &g->sums, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
-      ex_.mark(5);
+      ex_.mark(3);
       // 7. integrate, then key the next step
       ex_.for_each(keys_items(m), IntegrateStage{md, g, s});
-      ex_.mark(6);
+      ex_.mark(4);
     } else {
       ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
-      ex_.mark(5);
+      ex_.mark(3);
     }
   }
 
@@ -218,8 +212,7 @@ class SimImpl final : public Sim {
     a.keys_sorted = keys_sorted_.data();
     a.idx = idx_.data();
     a.perm = perm_.data();
-    a.inv = inv_.data();
-    a.src = src_.data();
+    a.ghost_of = ghost_of_.data();
     a.acc = acc_.data();
     a.xsph = xsph_.data();
     a.items = items_.data();
@@ -236,7 +229,7 @@ class SimImpl final : public Sim {
   Buf<int> id_[2];
   Buf<float> rho_, prs_;
   Buf<uint32_t> keys_, keys_sorted_;
-  Buf<int> idx_, perm_, inv_, src_;
+  Buf<int> idx_, perm_, ghost_of_;
   Buf<Vec3> acc_, xsph_;
   Buf<StepSums> items_;
   Buf<uint32_t> cells_start_, cells_end_;

@@ -75,12 +75,10 @@ struct GridView {
   const uint32_t* cell_end;
 };
 
-// visit every particle of the chosen layers within the support radius of xi; with several
-// lanes, lane l of n visits the candidates l, l + n, ... of each cell (its partial sums are
-// combined by the caller)
+// visit every particle of the chosen layers within the support radius of xi (one thread;
+// core/lanes.h has the cooperative form a warp uses)
 template <int D, class Visitor>
-CPS_HD CPS_INLINE void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                         int lane = 0, int nlanes = 1) {
+CPS_HD CPS_INLINE void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) {
   int c[D];
   g.spec.cell_of(xi, c);
   const int nlayers = ghosts ? 2 : 1;
@@ -100,7 +98,7 @@ CPS_HD CPS_INLINE void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi,
     for (int layer = 0; layer < nlayers; ++layer) {
       uint32_t slot = m + uint32_t(layer) * g.spec.ncells;
       uint32_t end = g.cell_end[slot];
-      for (uint32_t j = g.cell_start[slot] + uint32_t(lane); j < end; j += uint32_t(nlanes)) {
+      for (uint32_t j = g.cell_start[slot]; j < end; ++j) {
         Vec<D> d = xi - g.pos[j];
         float r2 = norm2(d);
         if (r2 < g.spec.h2) visit(int(j), d, r2);
