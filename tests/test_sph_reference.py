@@ -89,12 +89,16 @@ def reference(p, pos, vel, die):
     rr = np.sqrt(r2)
 
     # density: Poly6 sum incl. the self term, renormalised by the fluid share of the kernel
-    # where the die's surface cuts it (the face taken as a plane), floored
+    # where the die cuts it (the product over the box axes of Poly6's slab marginal mass
+    # inside the box's slab), floored
     w = np.where(inside, 315.0 / (64.0 * math.pi * h**9) * np.clip(h * h - r2, 0, None) ** 3, 0.0)
     Rd = quat_matrix(die["orientation"])
     X = np.asarray(die["position"], dtype=np.float64)
-    sd, nl = box_distance(p["die_half"], (pos - X) @ Rd)
-    cut = np.minimum(gamma_beyond_plane(sd, h), 0.5)
+    local = (pos - X) @ Rd
+    sd, nl = box_distance(p["die_half"], local)
+    half = np.asarray(p["die_half"], dtype=np.float64)
+    inside_box = np.prod(1.0 - gamma_beyond_plane(half - local, h) - gamma_beyond_plane(half + local, h), axis=1)
+    cut = np.minimum(inside_box, 0.5)
     rho = np.maximum(m * w.sum(axis=1) / (1.0 - cut), floor)
     # Tait equation of state, negative pressure clamped
     prs = np.maximum(B * ((rho / rho0) ** gam - 1.0), 0.0)

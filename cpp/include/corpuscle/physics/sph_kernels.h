@@ -54,6 +54,18 @@ struct SphKernels {
     float F = s * (1.0f + s2 * (-4.0f / 3.0f + s2 * (6.0f / 5.0f + s2 * (-4.0f / 7.0f + s2 / 9.0f))));
     return 0.5f - (315.0f / 256.0f) * F;
   }
+  // fraction of the Poly6 kernel's mass inside an axis-aligned box [-half, half] for a particle
+  // at p (box frame): the product over axes of the kernel's 1-D marginal mass in the box's slab.
+  // Exact for a single face (a plane) and smooth across edges and corners; for a box smaller
+  // than the kernel it shrinks with the box instead of saturating at the plane's 1/2.
+  CPS_HD float box_fraction(const Vec<D>& half, const Vec<D>& p) const {
+    float f = 1.0f;
+    for (int k = 0; k < D; ++k) {
+      // 1 minus the marginal mass beyond the upper face and beyond the lower face
+      f *= 1.0f - poly6_beyond_plane(half[k] - p[k]) - poly6_beyond_plane(half[k] + p[k]);
+    }
+    return f;
+  }
   // viscosity-kernel Laplacian
   CPS_HD float visc_lap(float r) const { return r >= h ? 0.0f : visc_lap_c * (h - r); }
 };

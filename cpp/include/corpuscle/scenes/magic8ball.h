@@ -217,8 +217,8 @@ struct ReorderStage {
 // stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles,
 // copied to each particle's ghost.
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
-// of the kernel (the die face taken as a plane), as if mirrored fluid filled the die, so
-// the pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
+// of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
+// pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
 struct DensityStage {
   const Model* model;
   const Globals* g;
@@ -232,7 +232,7 @@ struct DensityStage {
     L.for_each_neighbor(grid, x, true, v);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
-    float cut = m.kern.poly6_beyond_plane(body_distance(m.die, g->die, x));
+    float cut = m.kern.box_fraction(m.die.half, qrotate_inv(g->die.q, x - g->die.x));
     float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(m.sph, rho);
     a.rho[i] = rho;
