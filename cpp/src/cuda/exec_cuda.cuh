@@ -3,6 +3,7 @@
 #pragma once
 #include <cuda_runtime.h>
 
+#include <cstdlib>
 #include <cub/cub.cuh>
 #include <utility>
 #include <vector>
@@ -111,9 +112,13 @@ struct CudaExec {
     size_t size() const { return n; }
   };
 
-  CudaExec() { CPS_CUDA_CHECK(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking)); }
+  CudaExec() {
+    CPS_CUDA_CHECK(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking));
+    // largest sort done by one CUB block-sort kernel (benchmarks compare it with the device sort)
+    if (const char* v = std::getenv("CORPUSCLE_CUDA_BLOCK_SORT_MAX")) block_sort_max_ = std::atoi(v);
+  }
   CudaExec(CudaExec&& o) noexcept
-      : stream_(std::exchange(o.stream_, nullptr)), temp_(std::exchange(o.temp_, nullptr)),
+      : stream_(std::exchange(o.stream_, nullptr)), block_sort_max_(o.block_sort_max_), temp_(std::exchange(o.temp_, nullptr)),
         temp_bytes_(std::exchange(o.temp_bytes_, 0)) {
     for (int p = 0; p < 2; ++p) {
       graph_[p] = std::exchange(o.graph_[p], nullptr);
@@ -157,7 +162,7 @@ struct CudaExec {
   static constexpr int kSortThreads = 1024, kSortItems = 8;
   template <class F>
   void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const F& f) {
-    if (n <= kSortThreads * kSortItems) {
+    if (n <= kSortThreads * kSortItems && n <= block_sort_max_) {
       k_block_sort_then<kSortThreads, kSortItems><<<1, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, n, bits, f);
       CPS_CUDA_LAUNCH_CHECK();
       return;
@@ -292,6 +297,7 @@ struct CudaExec {
   }
 
   cudaStream_t stream_ = nullptr;
+  int block_sort_max_ = 1 << 30;
   void* temp_ = nullptr;
   size_t temp_bytes_ = 0;
   cudaGraphExec_t graph_[2] = {nullptr, nullptr};

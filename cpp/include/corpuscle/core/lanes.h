@@ -39,8 +39,8 @@ struct WarpLanes {
   __device__ bool leader() const { return lane() == 0; }
 
   // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
-  // (lane l: slots l and l + 32), then walk the cells with the ranges broadcast by shuffles,
-  // each lane taking every 32nd candidate; no load waits on another cell's range
+  // (lane l: slots l and l + 32), then walk the cells, a few at a time, with the ranges
+  // broadcast by shuffles, each lane taking every 32nd candidate of each cell
   template <int D, class Visitor>
   __device__ void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) const {
     constexpr int kStencil = D == 3 ? 27 : 9;
@@ -51,13 +51,28 @@ struct WarpLanes {
     uint32_t s0 = 0, e0 = 0, s1 = 0, e1 = 0;
     load_range(g, c, l, nslots, s0, e0);
     load_range(g, c, l + 32, nslots, s1, e1);
-    for (int k = 0; k < nslots; ++k) {
-      uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
-      uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
-      for (uint32_t j = s + uint32_t(l); j < e; j += 32u) {
-        Vec<D> d = xi - g.pos[j];
-        float r2 = norm2(d);
-        if (r2 < g.spec.h2) visit(int(j), d, r2);
+    // kGroup cells at a time, so that several independent candidate loads are in flight
+    constexpr int kGroup = 3;
+    for (int k0 = 0; k0 < nslots; k0 += kGroup) {
+      uint32_t s[kGroup], e[kGroup];
+      uint32_t longest = 0;
+#pragma unroll
+      for (int q = 0; q < kGroup; ++q) {
+        const int k = k0 + q;  // < 64; slots past nslots were loaded as empty
+        s[q] = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
+        e[q] = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
+        longest = e[q] - s[q] > longest ? e[q] - s[q] : longest;
+      }
+      for (uint32_t o = uint32_t(l); o < longest; o += 32u) {
+#pragma unroll
+        for (int q = 0; q < kGroup; ++q) {
+          const uint32_t j = s[q] + o;
+          if (j < e[q]) {
+            Vec<D> d = xi - g.pos[j];
+            float r2 = norm2(d);
+            if (r2 < g.spec.h2) visit(int(j), d, r2);
+          }
+        }
       }
     }
   }
