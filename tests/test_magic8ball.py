@@ -53,28 +53,28 @@ def test_settled_fluid_stays_in_the_container(still):
 
 def test_settled_pressure_is_hydrostatic(still):
     # pressure grows with depth: the least-squares slope dp/dz is negative and its size is
-    # rho0 g within a factor 2. The factor: weakly compressible SPH pressure carries
-    # particle-scale noise (Tait with gamma = 7 turns a 1% density ripple into ~7% of B),
-    # particles at the free surface left by the fluid's compression are clamped to p = 0,
-    # and 1.5 s leaves some sloshing; measured 0.8 to 1.1 of rho0 g at this resolution.
+    # rho0 g within 15%. Weakly compressible SPH pressure carries particle-scale noise (Tait
+    # with gamma = 7 turns a 1% density ripple into ~7% of B) and particles at the top, left
+    # by the fluid's compression, are clamped to p = 0; measured 0.98 to 1.03 of rho0 g at
+    # this resolution (seeds 1-3), so 15% is a 5x margin.
     sim = still["sim"]
     x = sim.field("position", copy=True).astype(np.float64)
     p = sim.field("pressure", copy=True).astype(np.float64)
     slope = np.polyfit(x[:, 2], p, 1)[0]
     rho_g = sim.params["rest_density"] * G
     assert slope < 0
-    assert 0.5 < -slope / rho_g < 2.0, -slope / rho_g
+    assert 0.85 < -slope / rho_g < 1.15, -slope / rho_g
 
 
 def test_settled_density_is_near_rest(still):
-    # mean density within 2% of rest (measured 0.4% to 1.4% below), and the 95th percentile of
-    # |rho/rho0 - 1| below 10% (measured 7-9%: the largest errors are the kernel-deficient
-    # particles at the free surface at the top, the bulk is within ~2%)
+    # mean density within 2% of rest (measured 0.9% to 1.0% above: the column is compressed
+    # by its weight), and the 95th percentile of |rho/rho0 - 1| below 6% (measured 3.7-3.8%,
+    # seeds 1-3; the largest errors are the kernel-deficient particles at the top)
     sim = still["sim"]
     rho = sim.field("density", copy=True).astype(np.float64)
     rho0 = sim.params["rest_density"]
     assert abs(rho.mean() / rho0 - 1) < 0.02
-    assert np.percentile(np.abs(rho / rho0 - 1), 95) < 0.10
+    assert np.percentile(np.abs(rho / rho0 - 1), 95) < 0.06
 
 
 def test_die_stays_in_still_fluid_at_coarse_resolution(still):
