@@ -1,4 +1,4 @@
-"""A run that goes unstable stops, names the step, exits 3 and keeps its frames (real core)."""
+"""The CLI on the real core: an unstable run stops and keeps its frames; --render renders as it records."""
 import pytest
 
 pytest.importorskip("corpuscle._core")
@@ -27,3 +27,17 @@ def test_stable_run_reports_no_problem():
     sim = corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300)
     sim.step(20)
     assert sim.check_health() is None
+
+
+def test_run_render_writes_a_frame_per_recorded_frame(tmp_path):
+    # `corpuscle run --render OUT` renders as it records: one picture per recorded frame
+    Image = pytest.importorskip("PIL.Image")
+    out = tmp_path / "run.cps"
+    gif = tmp_path / "run.gif"
+    rc = main(["run", "magic8ball", "--particles", "300", "--steps", "20", "--every", "10", "--no-progress",
+               "--out", str(out), "--render", str(gif), "--render-size", "160x90"])
+    assert rc == 0
+    recorded = len(corpuscle.open(out))
+    with Image.open(gif) as im:
+        assert im.size == (160, 90)
+        assert getattr(im, "n_frames", 1) == recorded == 3
