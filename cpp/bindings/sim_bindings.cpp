@@ -45,6 +45,7 @@ Model build_model(const nb::dict& p) {
   m.sph.xsph = req(p, "xsph");
   m.sph.density_floor = req(p, "density_floor");
   m.kern = SphKernels<D>::make(m.h);
+  m.max_neighbors = nb::cast<int>(p["max_neighbors"]);
   m.c0 = tait_sound_speed(m.sph);
   m.wall = SphereWall{req(p, "radius"), req(p, "wall_restitution"), req(p, "wall_friction")};
   m.shell_inertia = req(p, "shell_inertia");

@@ -147,6 +147,10 @@ class Simulation:
             "shakes": [dict(start=s["start"], end=s["end"], acceleration=list(s["acceleration"]),
                             torque=list(s["torque"])) for s in self.scene.shakes],
         }
+        # neighbour list capacity: 2.5 times the mean count within h (the fluid compresses a
+        # few percent; a list that still overflows stops the run as unstable), in warp widths
+        mean = 4.0 / 3.0 * math.pi * h ** 3 * n / fluid_volume
+        params["max_neighbors"] = int(math.ceil((2.5 * mean + 32) / 32.0)) * 32
         self.params = params
         die = {"position": die_pos.tolist(), "velocity": [0.0] * 3, "orientation": die_q.tolist(),
                "angular_velocity": [0.0] * 3}
@@ -328,7 +332,8 @@ class Simulation:
         st = self._sim.state()
         reasons = {1: "a particle position or velocity became non-finite (NaN/inf)",
                    2: "the die's state became non-finite (NaN/inf)",
-                   3: "a particle moved faster than 100 times the sound speed"}
+                   3: "a particle moved faster than 100 times the sound speed",
+                   4: "a particle had more neighbours than its list holds (the fluid collapsed)"}
         if st["bad"]:
             return f"unstable at step {st['bad_step']}: {reasons.get(st['bad'], 'unsound state')}"
         return None

@@ -19,6 +19,28 @@ struct SingleLane {
   CPS_HD void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) const {
     cps::for_each_neighbor(g, xi, ghosts, visit);
   }
+  // the same, also listing the neighbours (up to cap; returns how many there were)
+  template <int D, class Visitor>
+  CPS_HD int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
+                                       int* list, int cap) const {
+    int count = 0;
+    auto listing = [&](int j, const Vec<D>& d, float r2) {
+      if (count < cap) list[count] = j;
+      ++count;
+      visit(j, d, r2);
+    };
+    cps::for_each_neighbor(g, xi, ghosts, listing);
+    return count;
+  }
+  // visit the listed neighbours of xi
+  template <int D, class Visitor>
+  CPS_HD void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) const {
+    for (int e = 0; e < count; ++e) {
+      const int j = list[e];
+      Vec<D> d = xi - pos[j];
+      visit(j, d, norm2(d));
+    }
+  }
 };
 
 #ifdef __CUDACC__
@@ -38,11 +60,20 @@ struct WarpLanes {
   }
   __device__ bool leader() const { return lane() == 0; }
 
-  // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
-  // (lane l: slots l and l + 32), then walk the cells, a few at a time, with the ranges
-  // broadcast by shuffles, each lane taking every 32nd candidate of each cell
+  // the warp's neighbour loop (listing nothing)
   template <int D, class Visitor>
   __device__ void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) const {
+    for_each_neighbor_listing(g, xi, ghosts, visit, static_cast<int*>(nullptr), 0);
+  }
+
+  // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
+  // (lane l: slots l and l + 32), then walk the cells with the ranges broadcast by shuffles,
+  // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
+  // serial loop's order (cell by cell, ascending index: a ballot keeps lane order), up to cap;
+  // returns how many there were (the same on every lane).
+  template <int D, class Visitor>
+  __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
+                                           int* list, int cap) const {
     constexpr int kStencil = D == 3 ? 27 : 9;
     const int nslots = kStencil * (ghosts ? 2 : 1);
     const int l = lane();
@@ -51,29 +82,41 @@ struct WarpLanes {
     uint32_t s0 = 0, e0 = 0, s1 = 0, e1 = 0;
     load_range(g, c, l, nslots, s0, e0);
     load_range(g, c, l + 32, nslots, s1, e1);
-    // kGroup cells at a time, so that several independent candidate loads are in flight
-    constexpr int kGroup = 3;
-    for (int k0 = 0; k0 < nslots; k0 += kGroup) {
-      uint32_t s[kGroup], e[kGroup];
-      uint32_t longest = 0;
-#pragma unroll
-      for (int q = 0; q < kGroup; ++q) {
-        const int k = k0 + q;  // < 64; slots past nslots were loaded as empty
-        s[q] = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
-        e[q] = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
-        longest = e[q] - s[q] > longest ? e[q] - s[q] : longest;
-      }
-      for (uint32_t o = uint32_t(l); o < longest; o += 32u) {
-#pragma unroll
-        for (int q = 0; q < kGroup; ++q) {
-          const uint32_t j = s[q] + o;
-          if (j < e[q]) {
-            Vec<D> d = xi - g.pos[j];
-            float r2 = norm2(d);
-            if (r2 < g.spec.h2) visit(int(j), d, r2);
-          }
+    const unsigned below = (1u << l) - 1u;  // lanes before this one
+    int count = 0;
+    for (int k = 0; k < nslots; ++k) {
+      uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
+      uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
+      for (uint32_t base = s; base < e; base += 32u) {
+        const uint32_t j = base + uint32_t(l);
+        Vec<D> d = Vec<D>::zero();
+        float r2 = 0.0f;
+        bool hit = false;
+        if (j < e) {
+          d = xi - g.pos[j];
+          r2 = norm2(d);
+          hit = r2 < g.spec.h2;
         }
+        const unsigned mask = __ballot_sync(0xffffffffu, hit);
+        if (hit) {
+          const int at = count + __popc(mask & below);
+          if (at < cap) list[at] = int(j);
+          visit(int(j), d, r2);
+        }
+        count += __popc(mask);
       }
+    }
+    return count;
+  }
+
+  // visit the listed neighbours of xi, each lane every 32nd entry
+  template <int D, class Visitor>
+  __device__ void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                  Visitor& visit) const {
+    for (int e = lane(); e < count; e += 32) {
+      const int j = list[e];
+      Vec<D> d = xi - pos[j];
+      visit(j, d, norm2(d));
     }
   }
 

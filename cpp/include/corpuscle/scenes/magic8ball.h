@@ -27,6 +27,7 @@ struct ShakeWindow {
 // constant per-scene parameters
 struct Model {
   int n_fluid;           // fluid particles (ghost slots: the same number again)
+  int max_neighbors;     // neighbour list capacity per particle
   float h;               // smoothing length = cell size
   SphParams sph;
   SphKernels<D> kern;
@@ -81,6 +82,7 @@ struct SumsOp {
 constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
 constexpr int kBadDie = 2;        // the die's state went non-finite
 constexpr int kBadSpeed = 3;      // a speed passed 100 times the sound speed
+constexpr int kBadNeighbors = 4;  // a particle had more neighbours than its list holds
 
 // per-scene mutable scalars
 struct Globals {
@@ -110,6 +112,7 @@ struct Arrays {
   int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
   Vec3 *acc, *xsph;
   StepSums* items;
+  int *nbr, *nbr_count;  // neighbour lists (max_neighbors per fluid particle), built with the density
   uint32_t *cell_start, *cell_end;
 };
 
@@ -125,12 +128,14 @@ CPS_HD CPS_INLINE void control_at(const Model& m, const Globals& g, double t, Ve
   }
 }
 
-// set a flag from many threads (same value from all, so any order gives one result)
-CPS_HD CPS_INLINE void raise_flag(int* p) {
+// raise a flag from many threads: the largest code wins, whatever the order
+CPS_HD CPS_INLINE void raise_flag(int* p, int code) {
 #ifdef __CUDA_ARCH__
-  atomicExch(p, 1);
+  atomicMax(p, code);
 #else
-  __atomic_store_n(p, 1, __ATOMIC_RELAXED);
+  int seen = __atomic_load_n(p, __ATOMIC_RELAXED);
+  while (seen < code && !__atomic_compare_exchange_n(p, &seen, code, true, __ATOMIC_RELAXED, __ATOMIC_RELAXED)) {
+  }
 #endif
 }
 
@@ -215,13 +220,13 @@ struct ReorderStage {
 };
 
 // stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles,
-// copied to each particle's ghost.
+// copied to each particle's ghost; the neighbours found are listed for the force stage.
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
 struct DensityStage {
   const Model* model;
-  const Globals* g;
+  Globals* g;
   Arrays a;
   GridView<D> grid;
   template <class Lanes>
@@ -229,9 +234,12 @@ struct DensityStage {
     const Model& m = *model;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    L.for_each_neighbor(grid, x, true, v);
+    int count = L.for_each_neighbor_listing(grid, x, true, v, a.nbr + size_t(i) * size_t(m.max_neighbors),
+                                            m.max_neighbors);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
+    a.nbr_count[i] = count;
+    if (count > m.max_neighbors) raise_flag(&g->bad, kBadNeighbors);
     float cut = m.kern.box_fraction(m.die.half, qrotate_inv(g->die.q, x - g->die.x));
     float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(m.sph, rho);
@@ -246,8 +254,9 @@ struct DensityStage {
   }
 };
 
-// stage 5: SPH forces, XSPH, container-frame terms and die coupling of fluid particles; the
-// per-particle contributions to this step's reductions
+// stage 5: SPH forces (over the neighbours the density stage listed), XSPH, container-frame
+// terms and die coupling of fluid particles; the per-particle contributions to this step's
+// reductions
 struct ForceStage {
   const Model* model;
   const Globals* g;
@@ -258,7 +267,9 @@ struct ForceStage {
     const Model& m = *model;
     ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
     Vec3 x = a.pos[i];
-    L.for_each_neighbor(grid, x, true, fv);
+    int count = a.nbr_count[i];
+    L.for_each_listed(a.nbr + size_t(i) * size_t(m.max_neighbors), count < m.max_neighbors ? count : m.max_neighbors,
+                      grid.pos, x, fv);
     fv.reduce(L);
     if (!L.leader()) return;
     Vec3 v = a.vel[i];
@@ -337,7 +348,7 @@ struct IntegrateStage {
       Vec3 v = a.vel[i] + a.acc[i] * dt;
       x = a.pos[i] + (v + a.xsph[i]) * dt;
       reflect_at_wall(m.wall, x, v);
-      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_flag(&g->bad);
+      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_flag(&g->bad, kBadParticles);
       a.pos[i] = x;
       a.vel[i] = v;
     }

@@ -40,6 +40,8 @@ class SimImpl final : public Sim {
     acc_.resize(n);
     xsph_.resize(n);
     items_.resize(n);
+    nbr_.resize(size_t(n) * size_t(m.max_neighbors));
+    nbr_count_.resize(n);
     cells_start_.resize(2 * size_t(m.grid.ncells));
     cells_end_.resize(2 * size_t(m.grid.ncells));
     // initial globals
@@ -216,6 +218,8 @@ class SimImpl final : public Sim {
     a.acc = acc_.data();
     a.xsph = xsph_.data();
     a.items = items_.data();
+    a.nbr = nbr_.data();
+    a.nbr_count = nbr_count_.data();
     a.cell_start = cells_start_.data();
     a.cell_end = cells_end_.data();
     return a;
@@ -232,6 +236,7 @@ class SimImpl final : public Sim {
   Buf<int> idx_, perm_, ghost_of_;
   Buf<Vec3> acc_, xsph_;
   Buf<StepSums> items_;
+  Buf<int> nbr_, nbr_count_;
   Buf<uint32_t> cells_start_, cells_end_;
   int parity_ = 0;
   bool sorted_ = false;
