@@ -56,6 +56,13 @@ struct CpuExec {
     for_each(n, [&](int i) { f(i, SingleLane{}); });
   }
 
+  // for_each_lanes, then reduce_then
+  template <class F, class T, class Op, class Fin>
+  void for_each_lanes_reduce_then(int n, const F& f, const T* items, T* out, Op op, T init, const Fin& fin) const {
+    for_each_lanes(n, f);
+    reduce_then(items, n, out, op, init, fin);
+  }
+
   // a one-item stage (per-scene work)
   template <class F>
   void single(const F& f) const { f(0); }

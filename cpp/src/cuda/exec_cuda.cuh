@@ -26,6 +26,32 @@ __global__ void k_for_each_warp(int n, F f) {
   if (i < n) f(i, WarpLanes{});
 }
 
+// a warp per item, then the last block to finish reduces items[0, n) in a fixed order (so
+// the result does not depend on which block that is) and runs fin on the result
+template <class F, class T, class Op, class Fin, int kThreads>
+__global__ void __launch_bounds__(kThreads) k_for_each_warp_reduce_then(int n, F f, const T* items, T* out, Op op,
+                                                                        T init, Fin fin, unsigned* counter) {
+  int i = int((blockIdx.x * blockDim.x + threadIdx.x) >> 5);
+  if (i < n) f(i, WarpLanes{});
+  __shared__ bool last;
+  __threadfence();
+  __syncthreads();
+  if (threadIdx.x == 0) last = atomicAdd(counter, 1u) == gridDim.x - 1u;
+  __syncthreads();
+  if (!last) return;
+  __threadfence();
+  using BlockReduce = cub::BlockReduce<T, kThreads>;
+  __shared__ typename BlockReduce::TempStorage tmp;
+  T acc = init;
+  for (int k = int(threadIdx.x); k < n; k += kThreads) acc = op(acc, items[k]);
+  T r = BlockReduce(tmp).Reduce(acc, op);
+  if (threadIdx.x == 0) {
+    *out = r;
+    fin(0);
+    *counter = 0u;  // ready for the next launch
+  }
+}
+
 template <class F>
 __global__ void k_single(F f) {
   f(0);
@@ -61,7 +87,7 @@ __global__ void __launch_bounds__(kThreads) k_reduce_block_then(const T* in, int
 template <int kThreads, int kItems, class F>
 __global__ void __launch_bounds__(kThreads) k_block_sort_then(const uint32_t* kin, uint32_t* kout, const int* vin,
                                                               int* vout, int n, int bits, F f) {
-  using Sort = cub::BlockRadixSort<uint32_t, kThreads, kItems, int>;
+  using Sort = cub::BlockRadixSort<uint32_t, kThreads, kItems, int, 5>;
   __shared__ typename Sort::TempStorage tmp;
   uint32_t k[kItems];
   int v[kItems];
@@ -119,7 +145,7 @@ struct CudaExec {
   }
   CudaExec(CudaExec&& o) noexcept
       : stream_(std::exchange(o.stream_, nullptr)), block_sort_max_(o.block_sort_max_), temp_(std::exchange(o.temp_, nullptr)),
-        temp_bytes_(std::exchange(o.temp_bytes_, 0)) {
+        temp_bytes_(std::exchange(o.temp_bytes_, 0)), counter_(std::exchange(o.counter_, nullptr)) {
     for (int p = 0; p < 2; ++p) {
       graph_[p] = std::exchange(o.graph_[p], nullptr);
       eager_[p] = o.eager_[p];
@@ -131,6 +157,7 @@ struct CudaExec {
       if (g) cudaGraphExecDestroy(g);
     for (auto& e : events_) cudaEventDestroy(e.second);
     if (temp_) cudaFree(temp_);
+    if (counter_) cudaFree(counter_);
     if (stream_) cudaStreamDestroy(stream_);
   }
 
@@ -151,6 +178,25 @@ struct CudaExec {
     CPS_CUDA_LAUNCH_CHECK();
   }
 
+  // for_each_lanes(n, f), then reduce_then(items, n, out, op, init, fin): fused into one
+  // kernel for small n (the last block reduces), two launches otherwise
+  template <class F, class T, class Op, class Fin>
+  void for_each_lanes_reduce_then(int n, const F& f, const T* items, T* out, Op op, T init, const Fin& fin) {
+    if (n <= 0 || n > kSmallReduce) {
+      for_each_lanes(n, f);
+      reduce_then(items, n, out, op, init, fin);
+      return;
+    }
+    if (!counter_) {
+      CPS_CUDA_CHECK(cudaMalloc(&counter_, sizeof(unsigned)));
+      CPS_CUDA_CHECK(cudaMemset(counter_, 0, sizeof(unsigned)));
+    }
+    long long threads = 32LL * n;
+    k_for_each_warp_reduce_then<F, T, Op, Fin, kBlock>
+        <<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f, items, out, op, init, fin, counter_);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
   template <class F>
   void single(const F& f) {
     k_single<<<1, 1, 0, stream_>>>(f);
@@ -159,7 +205,7 @@ struct CudaExec {
 
   // CUB's stable LSD radix sort over the key bits in use, then a stage over the sorted
   // slots: for inputs that fit one block, both in one CUB block-sort kernel
-  static constexpr int kSortThreads = 1024, kSortItems = 8;
+  static constexpr int kSortThreads = 512, kSortItems = 16;
   template <class F>
   void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const F& f) {
     if (n <= kSortThreads * kSortItems && n <= block_sort_max_) {
@@ -300,6 +346,7 @@ struct CudaExec {
   int block_sort_max_ = 1 << 30;
   void* temp_ = nullptr;
   size_t temp_bytes_ = 0;
+  unsigned* counter_ = nullptr;  // blocks finished, for the fused reduction
   cudaGraphExec_t graph_[2] = {nullptr, nullptr};
   int eager_[2] = {0, 0};
   bool graphs_ = true;

@@ -10,9 +10,9 @@
 namespace cps::m8 {
 
 // names of the pipeline stages, in order (for profiles)
-inline const char* const kStageNames[] = {"sort+reorder", "density", "forces", "reduce+finalize",
+inline const char* const kStageNames[] = {"sort+reorder", "density", "forces+reduce+finalize",
                                           "integrate+keys"};
-constexpr int kNumStages = 5;
+constexpr int kNumStages = 4;
 
 template <class Exec>
 class SimImpl final : public Sim {
@@ -184,19 +184,18 @@ class SimImpl final : public Sim {
     // 4. density and pressure
     ex_.for_each_lanes(n, DensityStage{md, g, s, grid});
     ex_.mark(1);
-    // 5. forces
-    ex_.for_each_lanes(n, ForceStage{md, g, s, grid});
-    ex_.mark(2);
-    // 6. reductions and the per-scene update
+    // 5. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
-      ex_.reduce_then(s.items, n, &g->sums, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
-      ex_.mark(3);
-      // 7. integrate, then key the next step
+      ex_.for_each_lanes_reduce_then(n, ForceStage{md, g, s, grid}, s.items, &g->sums, SumsOp{},
+                                     StepSums::identity(), FinalizeStage{md, g});
+      ex_.mark(2);
+      // 6. integrate, then key the next step
       ex_.for_each(keys_items(m), IntegrateStage{md, g, s});
-      ex_.mark(4);
-    } else {
-      ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
       ex_.mark(3);
+    } else {
+      ex_.for_each_lanes(n, ForceStage{md, g, s, grid});
+      ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+      ex_.mark(2);
     }
   }
 
