@@ -9,7 +9,7 @@ python3 -m pip install --no-build-isolation --no-deps . > "$OUT/build.log" 2>&1 
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$OUT/device.txt"
 corpuscle info | tee -a "$OUT/device.txt"
 # gpu-marked tests (CUDA against the CPU backend)
-python3 -m pytest -q -m gpu tests/test_backends.py 2>&1 | tee "$OUT/gpu_tests.log" | tail -3
+python3 -m pytest -q -m gpu tests/test_backends.py tests/test_neighbor_reuse.py 2>&1 | tee "$OUT/gpu_tests.log" | tail -3
 # the default scene on every backend, then larger counts
 corpuscle bench magic8ball --backend serial cpu cuda --steps 200 --repeats 5 --json "$OUT/bench_default.json" --no-progress 2>&1 | tee "$OUT/bench.log"
 for n in 20000 200000; do

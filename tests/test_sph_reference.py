@@ -72,9 +72,11 @@ def reference(p, pos, vel, die):
     h, m, rho0 = p["h"], p["mass"], p["rest_density"]
     B, gam, mu, eps, floor, R = p["stiffness"], p["gamma"], p["viscosity"], p["xsph"], p["density_floor"], p["radius"]
 
-    # mirrored ghosts of fluid within h of the wall: x (2R - |x|) / |x|, normal velocity reversed
+    # mirrored ghosts of fluid within the list radius h (1 + skin) of the wall (those beyond h
+    # lie beyond every fluid particle's support and add nothing): x (2R - |x|) / |x|, normal
+    # velocity reversed
     r = np.linalg.norm(pos, axis=1)
-    gi = np.nonzero(r > max(R - h, 0.0))[0]
+    gi = np.nonzero(r > max(R - p["list_radius"], 0.0))[0]
     nrm = pos[gi] / r[gi, None]
     gpos = pos[gi] * ((2 * R - r[gi]) / r[gi])[:, None]
     gvel = vel[gi] - 2 * np.einsum("ij,ij->i", vel[gi], nrm)[:, None] * nrm
@@ -195,12 +197,12 @@ def random_ball(rng, count, radius, accept=None):
 
 
 def random_state(seed, radius=None, speed=0.3):
-    """Random positions in the container (away from the ghost threshold |x| = R - h, where
-    float32 rounding could decide either way) and random velocities of about `speed` m/s."""
+    """Random positions in the container (away from the ghost threshold |x| = R - h (1 + skin),
+    where float32 rounding could decide either way) and random velocities of about `speed` m/s."""
     rng = np.random.default_rng(seed)
-    R, h = 0.15, 0.05
+    R, band = 0.15, 0.05 * 1.2  # the scene's h and default skin (sph.scale_h off in these tests)
     radius = radius or R * 0.999
-    pos = random_ball(rng, N, radius, accept=lambda x: np.abs(np.linalg.norm(x, axis=1) - (R - h)) > 1e-5)
+    pos = random_ball(rng, N, radius, accept=lambda x: np.abs(np.linalg.norm(x, axis=1) - (R - band)) > 1e-5)
     vel = (rng.normal(size=(N, 3)) * speed).astype(np.float32)
     return pos, vel
 
@@ -314,7 +316,7 @@ def test_ghosts_mirror_the_wall_band(case):
     np.testing.assert_allclose(core["ghost_velocity"][ic], ref["ghost_velocity"][ir], atol=1e-6)
     # outside the sphere, within h of it
     rg = np.linalg.norm(gp_core, axis=1)
-    assert np.all(rg >= 0.15 - 1e-6) and np.all(rg <= 0.15 + sim.params["h"] + 1e-6)
+    assert np.all(rg >= 0.15 - 1e-6) and np.all(rg <= 0.15 + sim.params["list_radius"] + 1e-6)
 
 
 def test_density_matches_reference(case):
@@ -461,7 +463,8 @@ def test_xsph_and_integration_of_one_step():
 
 
 def test_pair_forces_conserve_momentum():
-    # no gravity, die out of reach, every particle at least h inside the wall (no ghosts):
+    # no gravity, die out of reach, every particle at least the list radius h (1 + skin)
+    # inside the wall (no ghosts):
     # pressure (symmetric p_i/rho_i^2 + p_j/rho_j^2 with an antisymmetric gradient) and
     # viscosity (m (v_j - v_i) / (rho_i rho_j) lap W, antisymmetric) cancel in pairs, so
     # sum_i m a_i = 0. Each a_i is a float32 sum, so the total is compared with sum_i m |a_i|:
@@ -469,7 +472,7 @@ def test_pair_forces_conserve_momentum():
     # while a one-sided term (say p_i/rho_i^2 alone) leaves a net force of order 1e-2.
     sim = make_sim({"gravity.g": [0.0, 0.0, 0.0]})
     rng = np.random.default_rng(21)
-    pos = random_ball(rng, N, 0.1 - 1e-3)
+    pos = random_ball(rng, N, 0.15 - sim.params["list_radius"] - 1e-3)
     vel = (rng.normal(size=(N, 3)) * 0.5).astype(np.float32)
     core, st, ref = evaluate(sim, pos, vel)
     assert st["n_ghost"] == 0 and st["die_contacts"] == 0

@@ -46,6 +46,8 @@ Model build_model(const nb::dict& p) {
   m.sph.density_floor = req(p, "density_floor");
   m.kern = SphKernels<D>::make(m.h);
   m.max_neighbors = nb::cast<int>(p["max_neighbors"]);
+  m.list_radius = req(p, "list_radius");
+  m.rebuild_disp2 = req(p, "rebuild_distance") * req(p, "rebuild_distance");
   m.c0 = tait_sound_speed(m.sph);
   m.wall = SphereWall{req(p, "radius"), req(p, "wall_restitution"), req(p, "wall_friction")};
   m.shell_inertia = req(p, "shell_inertia");
@@ -60,8 +62,8 @@ Model build_model(const nb::dict& p) {
   m.dt = DtParams{req(p, "dt_min"), req(p, "dt_max"), req(p, "cfl_advective"), req(p, "cfl_acoustic"),
                   req(p, "cfl_force"), req(p, "cfl_viscous")};
   // the grid covers the sphere and the ghosts mirrored up to h beyond it
-  float ext = m.wall.radius + m.h;
-  m.grid = make_grid<D>(Vec3{{-ext, -ext, -ext}}, Vec3{{ext, ext, ext}}, m.h);
+  float ext = m.wall.radius + m.list_radius;
+  m.grid = make_grid<D>(Vec3{{-ext, -ext, -ext}}, Vec3{{ext, ext, ext}}, m.list_radius);
   if (m.grid.bits > morton_max_bits<D>())
     throw nb::value_error("magic8ball: the grid needs more than 1024 cells per axis (h too small for the container)");
   nb::list shakes = nb::cast<nb::list>(p["shakes"]);
@@ -161,6 +163,7 @@ void bind_sim(nb::module_& m) {
              d["step"] = g.step;
              d["dt"] = g.dt;
              d["n_ghost"] = g.n_ghost;
+             d["rebuilds"] = g.rebuilds;
              d["done"] = bool(g.done);
              d["bad"] = g.bad;
              d["bad_step"] = g.bad_step;

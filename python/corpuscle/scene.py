@@ -693,6 +693,8 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "sph.h": _K("float", 0.05, "m", 0.0, 10.0, "SPH smoothing length (kernel support radius)", lo_open=True),
     "sph.scale_h": _K("bool", True, "", doc="scale h with particle count so neighbour counts stay fixed"),
     "sph.reference_particles": _K("int", 3500, "", 1, INT32_MAX, "particle count at which sph.h applies"),
+    "sph.skin": _K("float", 0.2, "h", 0.0, 1.0,
+                   "neighbour-list skin: lists reach h (1 + skin) and are reused until a particle moved too far; 0 rebuilds every step"),
     # gravity
     "gravity.g": _K("vec3", [0.0, 0.0, -9.81], "m/s²", -1e4, 1e4, "gravitational acceleration"),
     # rigid cube die

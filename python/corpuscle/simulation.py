@@ -147,9 +147,18 @@ class Simulation:
             "shakes": [dict(start=s["start"], end=s["end"], acceleration=list(s["acceleration"]),
                             torque=list(s["torque"])) for s in self.scene.shakes],
         }
-        # neighbour list capacity: 2.5 times the mean count within h (the fluid compresses a
-        # few percent; a list that still overflows stops the run as unstable), in warp widths
-        mean = 4.0 / 3.0 * math.pi * h ** 3 * n / fluid_volume
+        # neighbour lists reach h (1 + skin) and stand until a particle has moved skin h / 2
+        # (less the stretch of the mirror map, under which a ghost moves up to
+        # (2R - r) / r times as far as its particle at r >= R - h (1 + skin)); skin 0: every step
+        skin = float(v["sph.skin"])
+        list_radius = h * (1.0 + skin)
+        r_min = max(radius - list_radius, 0.25 * radius)
+        stretch = (2.0 * radius - r_min) / r_min
+        params["list_radius"] = list_radius
+        params["rebuild_distance"] = skin * h / (1.0 + stretch)
+        # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
+        # a few percent; a list that still overflows stops the run as unstable), in warp widths
+        mean = 4.0 / 3.0 * math.pi * list_radius ** 3 * n / fluid_volume
         params["max_neighbors"] = int(math.ceil((2.5 * mean + 32) / 32.0)) * 32
         self.params = params
         die = {"position": die_pos.tolist(), "velocity": [0.0] * 3, "orientation": die_q.tolist(),

@@ -84,10 +84,11 @@ struct CpuExec {
     });
   }
 
-  // sort, then run a stage over the n sorted slots
-  template <class F>
-  void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const F& f) {
-    sort_pairs(kin, kout, vin, vout, n, bits);
+  // sort when enabled(), then run a stage over the n slots
+  template <class E, class F>
+  void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const E& enabled,
+                 const F& f) {
+    if (enabled()) sort_pairs(kin, kout, vin, vout, n, bits);
     for_each(n, f);
   }
 

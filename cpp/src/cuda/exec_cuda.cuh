@@ -81,6 +81,35 @@ __global__ void __launch_bounds__(kThreads) k_reduce_block_then(const T* in, int
   }
 }
 
+// CUB's block radix sort for inputs that fit one block (stable, like the device sort; slots
+// past n are padded with all-ones keys, which sort last) when enabled(), then the stage f
+// over the slots in the same block
+template <int kThreads, int kItems, class E, class F>
+__global__ void __launch_bounds__(kThreads) k_block_sort_then(const uint32_t* kin, uint32_t* kout, const int* vin,
+                                                              int* vout, int n, int bits, E enabled, F f) {
+  if (enabled()) {
+    using Sort = cub::BlockRadixSort<uint32_t, kThreads, kItems, int>;
+    __shared__ typename Sort::TempStorage tmp;
+    uint32_t k[kItems];
+    int v[kItems];
+    for (int t = 0; t < kItems; ++t) {
+      int idx = int(threadIdx.x) * kItems + t;
+      k[t] = idx < n ? kin[idx] : 0xffffffffu;
+      v[t] = idx < n ? vin[idx] : 0;
+    }
+    Sort(tmp).Sort(k, v, 0, bits);
+    for (int t = 0; t < kItems; ++t) {
+      int idx = int(threadIdx.x) * kItems + t;
+      if (idx < n) {
+        kout[idx] = k[t];
+        vout[idx] = v[t];
+      }
+    }
+    __syncthreads();
+  }
+  for (int j = int(threadIdx.x); j < n; j += kThreads) f(j);
+}
+
 struct CudaExec {
   static constexpr bool on_device = true;
   static constexpr int kBlock = 128;
@@ -173,11 +202,19 @@ struct CudaExec {
     CPS_CUDA_LAUNCH_CHECK();
   }
 
-  // CUB's stable LSD radix sort over the key bits in use, then a stage over the sorted
-  // slots (a single-block CUB block sort fused with the stage measured no faster at 7,000
-  // keys on an H200, and one path serves every size)
-  template <class F>
-  void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const F& f) {
+  // CUB's stable LSD radix sort over the key bits in use when enabled() (read on the device),
+  // then a stage over the slots. Sorts that fit one block run as one CUB block sort fused
+  // with the stage, which skips the sort when it is not enabled; larger ones sort always.
+  static constexpr int kSortThreads = 1024, kSortItems = 8;
+  template <class E, class F>
+  void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const E& enabled,
+                 const F& f) {
+    if (n <= kSortThreads * kSortItems) {
+      k_block_sort_then<kSortThreads, kSortItems>
+          <<<1, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, n, bits, enabled, f);
+      CPS_CUDA_LAUNCH_CHECK();
+      return;
+    }
     sort_pairs(kin, kout, vin, vout, n, bits);
     for_each(n, f);
   }

@@ -28,6 +28,8 @@ struct ShakeWindow {
 struct Model {
   int n_fluid;           // fluid particles (ghost slots: the same number again)
   int max_neighbors;     // neighbour list capacity per particle
+  float list_radius;     // neighbour lists and cells: h (1 + skin)
+  float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
   float h;               // smoothing length = cell size
   SphParams sph;
   SphKernels<D> kern;
@@ -100,6 +102,8 @@ struct Globals {
   FrameMotion frame;     // this step's container-frame terms
   Vec3 user_acc, user_torque;  // control set through the API, added to the schedule
   StepSums sums;         // this step's reductions
+  int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (raised by step s - 1)
+  long long rebuilds;    // steps that sorted and relisted
 };
 
 // structure of arrays; fluid in [0, n_fluid), ghosts after it, capacity 2 n_fluid
@@ -110,6 +114,8 @@ struct Arrays {
   uint32_t *keys, *keys_sorted;
   int *idx, *perm;
   int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
+  int *ghost_slot;       // sorted fluid index -> its ghost's slot, or -1 (kept between rebuilds)
+  Vec3* x_build;         // positions at the last rebuild
   Vec3 *acc, *xsph;
   StepSums* items;
   int *nbr, *nbr_count;  // neighbour lists (max_neighbors per fluid particle), built with the density
@@ -143,7 +149,7 @@ CPS_HD CPS_INLINE void raise_flag(int* p, int code) {
 CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x) {
   const int n = m.n_fluid;
   a.keys[i] = m.grid.key(x, 0);
-  a.keys[n + i] = needs_ghost(m.wall, x, m.h) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
+  a.keys[n + i] = needs_ghost(m.wall, x, m.list_radius) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
   a.idx[i] = i;
   a.idx[n + i] = n + i;
 }
@@ -188,10 +194,21 @@ struct KeysStage {
     const Model& m = *model;
     Vec3 x = i < m.n_fluid ? a.pos[i] : Vec3::zero();
     start_step(m, g, a, i, &x);
+    if (i == 0) g->rebuild[g->step & 1] = 1;  // a new state is always sorted and listed
   }
 };
 
-// stage 2: gather particle arrays into sorted order, build ghosts, record cell ranges
+// whether this step sorts, reorders and relists (the rest of the time the order and the
+// neighbour lists of the last rebuild stand: nothing moved more than the skin allows)
+CPS_HD CPS_INLINE bool rebuilding(const Globals* g) { return g->rebuild[g->step & 1] != 0; }
+
+struct RebuildFlag {
+  const Globals* g;
+  CPS_HD bool operator()() const { return rebuilding(g); }
+};
+
+// stage 2: gather particle arrays into sorted order, build ghosts, record cell ranges; when
+// not rebuilding, carry the arrays over in their order (ghosts were moved by the integration)
 struct ReorderStage {
   const Model* model;
   Globals* g;
@@ -199,6 +216,14 @@ struct ReorderStage {
   CPS_HD void operator()(int j) const {
     const Model& m = *model;
     const int n = m.n_fluid, cap = 2 * n;
+    if (!rebuilding(g)) {
+      if (j < n + g->n_ghost) {
+        a.pos_alt[j] = a.pos[j];
+        a.vel_alt[j] = a.vel[j];
+        a.id_alt[j] = a.id[j];
+      }
+      return;
+    }
     mark_cell_range(m.grid, a.keys_sorted, j, cap, a.cell_start, a.cell_end);
     const uint32_t sentinel = m.grid.sentinel();
     if (a.keys_sorted[j] >= sentinel) return;
@@ -207,6 +232,7 @@ struct ReorderStage {
       a.pos_alt[j] = a.pos[o];
       a.vel_alt[j] = a.vel[o];
       a.id_alt[j] = a.id[o];
+      a.x_build[j] = a.pos[o];
     } else {
       int f = o - n;
       Vec3 x = a.pos[f];
@@ -234,19 +260,30 @@ struct DensityStage {
     const Model& m = *model;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    int count = L.for_each_neighbor_listing(grid, x, true, v, a.nbr + size_t(i) * size_t(m.max_neighbors),
-                                            m.max_neighbors);
+    int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
+    const bool rebuild = rebuilding(g);
+    int count;
+    if (rebuild) {
+      // walk the cells and list every particle within h (1 + skin)
+      count = L.for_each_neighbor_listing(grid, x, true, v, list, m.max_neighbors);
+    } else {
+      count = a.nbr_count[i];
+      L.for_each_listed(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v);
+    }
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
-    a.nbr_count[i] = count;
-    if (count > m.max_neighbors) raise_flag(&g->bad, kBadNeighbors);
+    if (rebuild) {
+      a.nbr_count[i] = count;
+      if (count > m.max_neighbors) raise_flag(&g->bad, kBadNeighbors);
+      a.ghost_slot[i] = a.ghost_of[a.perm[i]];
+    }
     float cut = m.kern.box_fraction(m.die.half, qrotate_inv(g->die.q, x - g->die.x));
     float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(m.sph, rho);
     a.rho[i] = rho;
     a.prs[i] = p;
     // the ghost of this particle carries the same density and pressure
-    int gs = a.ghost_of[a.perm[i]];
+    int gs = a.ghost_slot[i];
     if (gs >= 0) {
       a.rho[gs] = rho;
       a.prs[gs] = p;
@@ -304,6 +341,8 @@ struct FinalizeStage {
   CPS_HD void operator()(int) const {
     const Model& m = *model;
     Globals& G = *g;
+    G.rebuilds += G.rebuild[G.step & 1];
+    G.rebuild[G.step & 1] = 0;  // this step's readers are done with its flag
     if (G.done || G.time >= G.end_time) {
       G.done = 1;
       G.dt = 0.0f;
@@ -351,6 +390,14 @@ struct IntegrateStage {
       if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_flag(&g->bad, kBadParticles);
       a.pos[i] = x;
       a.vel[i] = v;
+      // the ghost follows its particle between rebuilds
+      int gs = a.ghost_slot[i];
+      if (gs >= 0) {
+        a.pos[gs] = mirror_position(m.wall, x);
+        a.vel[gs] = mirror_velocity(x, v);
+      }
+      // moved too far for the lists: the next step rebuilds (g->step is already the next)
+      if (norm2(x - a.x_build[i]) > m.rebuild_disp2) raise_flag(&g->rebuild[g->step & 1], 1);
     }
     start_step(m, g, a, i, &x);
   }

@@ -37,6 +37,8 @@ class SimImpl final : public Sim {
     idx_.resize(cap);
     perm_.resize(cap);
     ghost_of_.resize(n);
+    ghost_slot_.resize(n);
+    x_build_.resize(n);
     acc_.resize(n);
     xsph_.resize(n);
     items_.resize(n);
@@ -175,8 +177,10 @@ class SimImpl final : public Sim {
     Globals* g = g_.data();
     Arrays a = arrays(cur, nxt);
     // 1. keys come from the last step's integration (or ensure_keys)
-    // 2. sort by key, then reorder into the other buffers (ghosts built there, cell ranges)
-    ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), ReorderStage{md, g, a});
+    // 2. sort by key (when rebuilding), then reorder into the other buffers (ghosts built
+    //    there, cell ranges) or carry the arrays over
+    ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{g},
+                  ReorderStage{md, g, a});
     ex_.mark(0);
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
@@ -214,6 +218,8 @@ class SimImpl final : public Sim {
     a.idx = idx_.data();
     a.perm = perm_.data();
     a.ghost_of = ghost_of_.data();
+    a.ghost_slot = ghost_slot_.data();
+    a.x_build = x_build_.data();
     a.acc = acc_.data();
     a.xsph = xsph_.data();
     a.items = items_.data();
@@ -232,7 +238,8 @@ class SimImpl final : public Sim {
   Buf<int> id_[2];
   Buf<float> rho_, prs_;
   Buf<uint32_t> keys_, keys_sorted_;
-  Buf<int> idx_, perm_, ghost_of_;
+  Buf<int> idx_, perm_, ghost_of_, ghost_slot_;
+  Buf<Vec3> x_build_;
   Buf<Vec3> acc_, xsph_;
   Buf<StepSums> items_;
   Buf<int> nbr_, nbr_count_;
