@@ -694,6 +694,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args._argv = argv
     try:
         return int(args._handler(args) or 0)
+    except BrokenPipeError:
+        # stdout was closed early (`corpuscle bench ... | head`): stop quietly, as Unix tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     except Exception as exc:
         # bad input: one line, exit 2; CORPUSCLE_DEBUG=1 shows the traceback
         if not isinstance(exc, _user_errors()) or os.environ.get("CORPUSCLE_DEBUG"):
