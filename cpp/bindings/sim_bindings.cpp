@@ -46,6 +46,7 @@ Model build_model(const nb::dict& p) {
   m.sph.density_floor = req(p, "density_floor");
   m.kern = SphKernels<D>::make(m.h);
   m.max_neighbors = nb::cast<int>(p["max_neighbors"]);
+  m.max_near = nb::cast<int>(p["max_near"]);
   m.list_radius = req(p, "list_radius");
   m.rebuild_disp2 = req(p, "rebuild_distance") * req(p, "rebuild_distance");
   m.c0 = tait_sound_speed(m.sph);

@@ -158,8 +158,12 @@ class Simulation:
         params["rebuild_distance"] = skin * h / (1.0 + stretch)
         # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
         # a few percent; a list that still overflows stops the run as unstable), in warp widths
-        mean = 4.0 / 3.0 * math.pi * list_radius ** 3 * n / fluid_volume
-        params["max_neighbors"] = int(math.ceil((2.5 * mean + 32) / 32.0)) * 32
+        def capacity(reach):
+            mean = 4.0 / 3.0 * math.pi * reach ** 3 * n / fluid_volume
+            return int(math.ceil((2.5 * mean + 32) / 32.0)) * 32
+
+        params["max_neighbors"] = capacity(list_radius)
+        params["max_near"] = capacity(h)
         self.params = params
         die = {"position": die_pos.tolist(), "velocity": [0.0] * 3, "orientation": die_q.tolist(),
                "angular_velocity": [0.0] * 3}

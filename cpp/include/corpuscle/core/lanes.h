@@ -41,6 +41,24 @@ struct SingleLane {
       visit(j, d, norm2(d));
     }
   }
+  // visit the listed neighbours of xi and copy those closer than sqrt(r2max) to `out`, in
+  // order (up to cap); returns how many there were
+  template <int D, class Visitor>
+  CPS_HD int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                        Visitor& visit, float r2max, int* out, int cap) const {
+    int kept = 0;
+    for (int e = 0; e < count; ++e) {
+      const int j = list[e];
+      Vec<D> d = xi - pos[j];
+      float r2 = norm2(d);
+      visit(j, d, r2);
+      if (r2 < r2max) {
+        if (kept < cap) out[kept] = j;
+        ++kept;
+      }
+    }
+    return kept;
+  }
 };
 
 #ifdef __CUDACC__
@@ -118,6 +136,34 @@ struct WarpLanes {
       Vec<D> d = xi - pos[j];
       visit(j, d, norm2(d));
     }
+  }
+
+  // the same, copying the entries closer than sqrt(r2max) to `out` in list order (a ballot
+  // keeps lane order), up to cap; returns how many there were (the same on every lane)
+  template <int D, class Visitor>
+  __device__ int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                            Visitor& visit, float r2max, int* out, int cap) const {
+    const int l = lane();
+    const unsigned below = (1u << l) - 1u;
+    int kept = 0;
+    for (int base = 0; base < count; base += 32) {
+      const int e = base + l;
+      bool near = false;
+      if (e < count) {
+        const int j = list[e];
+        Vec<D> d = xi - pos[j];
+        float r2 = norm2(d);
+        visit(j, d, r2);
+        near = r2 < r2max;
+      }
+      const unsigned mask = __ballot_sync(0xffffffffu, near);
+      if (near) {
+        const int at = kept + __popc(mask & below);
+        if (at < cap) out[at] = list[e];
+      }
+      kept += __popc(mask);
+    }
+    return kept;
   }
 
  private:

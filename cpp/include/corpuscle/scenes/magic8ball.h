@@ -27,7 +27,8 @@ struct ShakeWindow {
 // constant per-scene parameters
 struct Model {
   int n_fluid;           // fluid particles (ghost slots: the same number again)
-  int max_neighbors;     // neighbour list capacity per particle
+  int max_neighbors;     // neighbour list capacity per particle (within the list radius)
+  int max_near;          // capacity of the per-step list of neighbours within h
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
   float h;               // smoothing length = cell size
@@ -118,7 +119,8 @@ struct Arrays {
   Vec3* x_build;         // positions at the last rebuild
   Vec3 *acc, *xsph;
   StepSums* items;
-  int *nbr, *nbr_count;  // neighbour lists (max_neighbors per fluid particle), built with the density
+  int *nbr, *nbr_count;  // neighbour lists within the list radius (max_neighbors per fluid particle)
+  int *near, *near_count;  // this step's neighbours within h (max_near per particle), for the forces
   uint32_t *cell_start, *cell_end;
 };
 
@@ -245,8 +247,16 @@ struct ReorderStage {
   }
 };
 
+// a visitor that does nothing (a walk that only lists)
+struct NoVisit {
+  template <class V>
+  CPS_HD void operator()(int, const V&, float) const {}
+};
+
 // stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles,
-// copied to each particle's ghost; the neighbours found are listed for the force stage.
+// copied to each particle's ghost. On rebuilds the cells are walked to list every particle
+// within the list radius; every step the list is walked for the density and its entries
+// within h are copied to a short list for the force stage.
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
@@ -263,18 +273,23 @@ struct DensityStage {
     int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
     const bool rebuild = rebuilding(g);
     int count;
+    NoVisit none;
     if (rebuild) {
       // walk the cells and list every particle within h (1 + skin)
-      count = L.for_each_neighbor_listing(grid, x, true, v, list, m.max_neighbors);
+      count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
     } else {
       count = a.nbr_count[i];
-      L.for_each_listed(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v);
     }
+    // walk the list: the density, and this step's neighbours within h for the forces
+    int* near = a.near + size_t(i) * size_t(m.max_near);
+    int kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
+                                            m.kern.h2, near, m.max_near);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
+    a.near_count[i] = kept;
+    if (count > m.max_neighbors || kept > m.max_near) raise_flag(&g->bad, kBadNeighbors);
     if (rebuild) {
       a.nbr_count[i] = count;
-      if (count > m.max_neighbors) raise_flag(&g->bad, kBadNeighbors);
       a.ghost_slot[i] = a.ghost_of[a.perm[i]];
     }
     float cut = m.kern.box_fraction(m.die.half, qrotate_inv(g->die.q, x - g->die.x));
@@ -304,9 +319,9 @@ struct ForceStage {
     const Model& m = *model;
     ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
     Vec3 x = a.pos[i];
-    int count = a.nbr_count[i];
-    L.for_each_listed(a.nbr + size_t(i) * size_t(m.max_neighbors), count < m.max_neighbors ? count : m.max_neighbors,
-                      grid.pos, x, fv);
+    int count = a.near_count[i];
+    L.for_each_listed(a.near + size_t(i) * size_t(m.max_near), count < m.max_near ? count : m.max_near, grid.pos, x,
+                      fv);
     fv.reduce(L);
     if (!L.leader()) return;
     Vec3 v = a.vel[i];

@@ -44,6 +44,8 @@ class SimImpl final : public Sim {
     items_.resize(n);
     nbr_.resize(size_t(n) * size_t(m.max_neighbors));
     nbr_count_.resize(n);
+    near_.resize(size_t(n) * size_t(m.max_near));
+    near_count_.resize(n);
     cells_start_.resize(2 * size_t(m.grid.ncells));
     cells_end_.resize(2 * size_t(m.grid.ncells));
     // initial globals
@@ -225,6 +227,8 @@ class SimImpl final : public Sim {
     a.items = items_.data();
     a.nbr = nbr_.data();
     a.nbr_count = nbr_count_.data();
+    a.near = near_.data();
+    a.near_count = near_count_.data();
     a.cell_start = cells_start_.data();
     a.cell_end = cells_end_.data();
     return a;
@@ -242,7 +246,7 @@ class SimImpl final : public Sim {
   Buf<Vec3> x_build_;
   Buf<Vec3> acc_, xsph_;
   Buf<StepSums> items_;
-  Buf<int> nbr_, nbr_count_;
+  Buf<int> nbr_, nbr_count_, near_, near_count_;
   Buf<uint32_t> cells_start_, cells_end_;
   int parity_ = 0;
   bool sorted_ = false;
