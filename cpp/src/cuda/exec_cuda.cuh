@@ -83,11 +83,17 @@ __global__ void __launch_bounds__(kThreads) k_reduce_block_then(const T* in, int
 
 // CUB's block radix sort for inputs that fit one block (stable, like the device sort; slots
 // past n are padded with all-ones keys, which sort last) when enabled(), then the stage f
-// over the slots in the same block
+// over the slots in the same block; when not enabled, the stage alone over all the blocks
 template <int kThreads, int kItems, class E, class F>
 __global__ void __launch_bounds__(kThreads) k_block_sort_then(const uint32_t* kin, uint32_t* kout, const int* vin,
                                                               int* vout, int n, int bits, E enabled, F f) {
-  if (enabled()) {
+  if (!enabled()) {
+    // no sort: every block takes its share of the stage
+    for (int j = int(blockIdx.x * kThreads + threadIdx.x); j < n; j += int(gridDim.x) * kThreads) f(j);
+    return;
+  }
+  if (blockIdx.x != 0) return;
+  {
     using Sort = cub::BlockRadixSort<uint32_t, kThreads, kItems, int>;
     __shared__ typename Sort::TempStorage tmp;
     uint32_t k[kItems];
@@ -210,8 +216,9 @@ struct CudaExec {
   void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const E& enabled,
                  const F& f) {
     if (n <= kSortThreads * kSortItems) {
+      const unsigned blocks = unsigned((n + kSortThreads - 1) / kSortThreads);
       k_block_sort_then<kSortThreads, kSortItems>
-          <<<1, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, n, bits, enabled, f);
+          <<<blocks, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, n, bits, enabled, f);
       CPS_CUDA_LAUNCH_CHECK();
       return;
     }
