@@ -187,15 +187,15 @@ class SimImpl final : public Sim {
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
     GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
-    // 4. density and pressure
+    // 3. density and pressure (and the neighbour lists)
     ex_.for_each_lanes(n, DensityStage{md, g, s, grid});
     ex_.mark(1);
-    // 5. forces, then the reductions and the per-scene update (one kernel where it fits)
+    // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
       ex_.for_each_lanes_reduce_then(n, ForceStage{md, g, s, grid}, s.items, &g->sums, SumsOp{},
                                      StepSums::identity(), FinalizeStage{md, g});
       ex_.mark(2);
-      // 6. integrate, then key the next step
+      // 5. integrate, then key the next step
       ex_.for_each(keys_items(m), IntegrateStage{md, g, s});
       ex_.mark(3);
     } else {
