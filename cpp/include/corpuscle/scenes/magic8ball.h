@@ -306,7 +306,7 @@ struct DensityStage {
   }
 };
 
-// stage 5: SPH forces (over the neighbours the density stage listed), XSPH, container-frame
+// stage 4: SPH forces (over the neighbours the density stage listed), XSPH, container-frame
 // terms and die coupling of fluid particles; the per-particle contributions to this step's
 // reductions
 struct ForceStage {
@@ -349,7 +349,7 @@ struct ForceStage {
   }
 };
 
-// stage 6 (one item per scene): dt, die and container integration, clock
+// stage 5 (one item per scene): dt, die and container integration, clock
 struct FinalizeStage {
   const Model* model;
   Globals* g;
@@ -388,7 +388,7 @@ struct FinalizeStage {
   }
 };
 
-// stage 7: integrate fluid (symplectic Euler, XSPH-corrected drift), enforce the wall, and
+// stage 6: integrate fluid (symplectic Euler, XSPH-corrected drift), enforce the wall, and
 // start the next step (its keys, cleared cell table and frame) in the same pass
 struct IntegrateStage {
   const Model* model;
