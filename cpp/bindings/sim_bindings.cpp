@@ -180,10 +180,7 @@ void bind_sim(nb::module_& m) {
              d["die_torque"] = a3(g.sums.torque);
              d["die_contacts"] = g.sums.contacts;
              d["answer_face"] = window_face(g.die.q);
-             // the dt these sums select (what the next finalize would choose, before end-time clipping)
-             const Model& m = s.sim->model();
-             float vmax = std::fmax(std::sqrt(g.sums.vmax2), norm(g.die.v));
-             d["chosen_dt"] = choose_dt(m.dt, m.h, vmax, std::sqrt(g.sums.amax2), m.c0, m.sph.viscosity / m.sph.rest_density);
+             d["chosen_dt"] = sums_dt(s.sim->model(), g);  // what a finalize would choose from these sums
              return d;
            }, "Scalars of the current state (time, dt, die pose, reductions of the last evaluation).")
       .def("set_control", [](PySim& s, Arr3 acc, Arr3 torque) {

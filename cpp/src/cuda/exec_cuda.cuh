@@ -25,6 +25,26 @@ __global__ void k_for_each_warp(int n, F f) {
   if (i < n) f(i, WarpLanes{});
 }
 
+// reduce in[0, n) in one block (fixed striding and tree, so the same on every run); thread
+// 0 writes *out and runs f(0) on it
+template <class T, class Op, class F, int kThreads>
+__device__ void block_reduce_then(const T* in, int n, T* out, Op op, T init, const F& f) {
+  using BlockReduce = cub::BlockReduce<T, kThreads>;
+  __shared__ typename BlockReduce::TempStorage tmp;
+  T acc = init;
+  for (int i = int(threadIdx.x); i < n; i += kThreads) acc = op(acc, in[i]);
+  T r = BlockReduce(tmp).Reduce(acc, op);
+  if (threadIdx.x == 0) {
+    *out = r;
+    f(0);
+  }
+}
+
+// a stage that does nothing (a reduction with no follow-up)
+struct NoStage {
+  CPS_HD void operator()(int) const {}
+};
+
 // a warp per item, then the last block to finish reduces items[0, n) in a fixed order (so
 // the result does not depend on which block that is) and runs fin on the result
 template <class F, class T, class Op, class Fin, int kThreads>
@@ -39,16 +59,8 @@ __global__ void __launch_bounds__(kThreads) k_for_each_warp_reduce_then(int n, F
   __syncthreads();
   if (!last) return;
   __threadfence();
-  using BlockReduce = cub::BlockReduce<T, kThreads>;
-  __shared__ typename BlockReduce::TempStorage tmp;
-  T acc = init;
-  for (int k = int(threadIdx.x); k < n; k += kThreads) acc = op(acc, items[k]);
-  T r = BlockReduce(tmp).Reduce(acc, op);
-  if (threadIdx.x == 0) {
-    *out = r;
-    fin(0);
-    *counter = 0u;  // ready for the next launch
-  }
+  block_reduce_then<T, Op, Fin, kThreads>(items, n, out, op, init, fin);
+  if (threadIdx.x == 0) *counter = 0u;  // ready for the next launch
 }
 
 template <class F>
@@ -56,29 +68,10 @@ __global__ void k_single(F f) {
   f(0);
 }
 
-// deterministic one-block reduction (fixed striding and tree), used for small inputs
-template <class T, class Op, int kThreads>
-__global__ void __launch_bounds__(kThreads) k_reduce_block(const T* in, int n, T* out, Op op, T init) {
-  using BlockReduce = cub::BlockReduce<T, kThreads>;
-  __shared__ typename BlockReduce::TempStorage tmp;
-  T acc = init;
-  for (int i = int(threadIdx.x); i < n; i += kThreads) acc = op(acc, in[i]);
-  T r = BlockReduce(tmp).Reduce(acc, op);
-  if (threadIdx.x == 0) *out = r;
-}
-
-// reduction fused with a one-item stage run by thread 0 on the result (saves a launch)
+// one-block reduction fused with a one-item stage run on the result (saves a launch)
 template <class T, class Op, class F, int kThreads>
 __global__ void __launch_bounds__(kThreads) k_reduce_block_then(const T* in, int n, T* out, Op op, T init, F f) {
-  using BlockReduce = cub::BlockReduce<T, kThreads>;
-  __shared__ typename BlockReduce::TempStorage tmp;
-  T acc = init;
-  for (int i = int(threadIdx.x); i < n; i += kThreads) acc = op(acc, in[i]);
-  T r = BlockReduce(tmp).Reduce(acc, op);
-  if (threadIdx.x == 0) {
-    *out = r;
-    f(0);
-  }
+  block_reduce_then<T, Op, F, kThreads>(in, n, out, op, init, f);
 }
 
 // CUB's block radix sort for inputs that fit one block (stable, like the device sort; slots
@@ -237,7 +230,8 @@ struct CudaExec {
   template <class T, class Op>
   void reduce(const T* in, int n, T* out, Op op, T init) {
     if (n <= kSmallReduce) {
-      k_reduce_block<T, Op, kReduceThreads><<<1, kReduceThreads, 0, stream_>>>(in, n, out, op, init);
+      k_reduce_block_then<T, Op, NoStage, kReduceThreads><<<1, kReduceThreads, 0, stream_>>>(in, n, out, op, init,
+                                                                                             NoStage{});
       CPS_CUDA_LAUNCH_CHECK();
       return;
     }

@@ -8,18 +8,12 @@ namespace cps {
 
 // one lane: the plain serial loop
 struct SingleLane {
-  CPS_HD int lane() const { return 0; }
-  CPS_HD int count() const { return 1; }
   CPS_HD float sum(float x) const { return x; }
   template <int D>
   CPS_HD Vec<D> sum(const Vec<D>& v) const { return v; }
   CPS_HD bool leader() const { return true; }
-  // the plain cell-by-cell neighbour loop
-  template <int D, class Visitor>
-  CPS_HD void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) const {
-    cps::for_each_neighbor(g, xi, ghosts, visit);
-  }
-  // the same, also listing the neighbours (up to cap; returns how many there were)
+  // the plain cell-by-cell neighbour loop, listing the neighbours (up to cap; returns how
+  // many there were)
   template <int D, class Visitor>
   CPS_HD int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
                                        int* list, int cap) const {
@@ -66,7 +60,6 @@ struct SingleLane {
 // (the same tree on every run, so results are reproducible)
 struct WarpLanes {
   __device__ int lane() const { return int(threadIdx.x) & 31; }
-  __device__ int count() const { return 32; }
   __device__ float sum(float x) const {
     for (int o = 16; o > 0; o >>= 1) x += __shfl_xor_sync(0xffffffffu, x, o);
     return x;
@@ -78,12 +71,6 @@ struct WarpLanes {
   }
   __device__ bool leader() const { return lane() == 0; }
 
-  // the warp's neighbour loop (listing nothing)
-  template <int D, class Visitor>
-  __device__ void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) const {
-    for_each_neighbor_listing(g, xi, ghosts, visit, static_cast<int*>(nullptr), 0);
-  }
-
   // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
   // (lane l: slots l and l + 32), then walk the cells with the ranges broadcast by shuffles,
   // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
@@ -92,8 +79,7 @@ struct WarpLanes {
   template <int D, class Visitor>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
                                            int* list, int cap) const {
-    constexpr int kStencil = D == 3 ? 27 : 9;
-    const int nslots = kStencil * (ghosts ? 2 : 1);
+    const int nslots = kStencil<D> * (ghosts ? 2 : 1);
     const int l = lane();
     int c[D];
     g.spec.cell_of(xi, c);
@@ -170,18 +156,8 @@ struct WarpLanes {
   // cell range of stencil slot k (layer k / stencil, offset k % stencil), empty outside the grid
   template <int D>
   __device__ static void load_range(const GridView<D>& g, const int* c, int k, int nslots, uint32_t& s, uint32_t& e) {
-    constexpr int kStencil = D == 3 ? 27 : 9;
-    if (k >= nslots) return;
-    int t = k % kStencil;
-    int cc[D];
-    bool inside = true;
-    for (int a = 0; a < D; ++a) {
-      cc[a] = c[a] + (t % 3) - 1;
-      t /= 3;
-      inside = inside && cc[a] >= 0 && cc[a] < g.spec.dims;
-    }
-    if (!inside) return;
-    uint32_t slot = morton_encode<D>(cc) + uint32_t(k / kStencil) * g.spec.ncells;
+    uint32_t slot;
+    if (k >= nslots || !stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) return;
     s = g.cell_start[slot];
     e = g.cell_end[slot];
   }

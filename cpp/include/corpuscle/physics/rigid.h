@@ -53,12 +53,6 @@ CPS_HD CPS_INLINE float box_sdf(const Vec3& half, const Vec3& p, Vec3& n) {
   return qmax;
 }
 
-// signed distance from a world point to a body's surface (negative inside)
-CPS_HD CPS_INLINE float body_distance(const RigidBox& b, const RigidState& s, const Vec3& x) {
-  Vec3 n;
-  return box_sdf(b.half, qrotate_inv(s.q, x - s.x), n);
-}
-
 struct ContactParams {
   float margin;     // contact when the signed distance is below this (m)
   float stiffness;  // spring acceleration per metre of penetration into the margin (1/s^2)

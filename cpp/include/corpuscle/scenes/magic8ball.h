@@ -349,6 +349,13 @@ struct ForceStage {
   }
 };
 
+// the largest speed of this step (fluid or die), and the dt the step's reductions select,
+// before the end-time clipping
+CPS_HD CPS_INLINE float max_speed(const Globals& g) { return fmax2(fsqrt(g.sums.vmax2), norm(g.die.v)); }
+CPS_HD CPS_INLINE float sums_dt(const Model& m, const Globals& g) {
+  return choose_dt(m.dt, m.h, max_speed(g), fsqrt(g.sums.amax2), m.c0, m.sph.viscosity / m.sph.rest_density);
+}
+
 // stage 5 (one item per scene): dt, die and container integration, clock
 struct FinalizeStage {
   const Model* model;
@@ -363,14 +370,11 @@ struct FinalizeStage {
       G.dt = 0.0f;
       return;
     }
-    float vdie = norm(G.die.v);
-    float vmax = fmax2(fsqrt(G.sums.vmax2), vdie);
-    float nu = m.sph.viscosity / m.sph.rest_density;
-    float dt = choose_dt(m.dt, m.h, vmax, fsqrt(G.sums.amax2), m.c0, nu);
+    float dt = sums_dt(m, G);
     const bool last = G.time + double(dt) >= G.end_time;
     if (last) dt = float(G.end_time - G.time);
     if (!finite(G.sums.vmax2) || !finite(G.sums.amax2)) G.bad = kBadParticles;
-    else if (vmax > 100.0f * m.c0) G.bad = kBadSpeed;
+    else if (max_speed(G) > 100.0f * m.c0) G.bad = kBadSpeed;
     // the die under the fluid's reaction, then kept inside the sphere
     integrate_box(m.die, m.body, G.frame, G.sums.force, G.sums.torque, dt, G.die);
     keep_box_in_sphere(m.die, m.wall.radius, m.body.restitution, G.die);

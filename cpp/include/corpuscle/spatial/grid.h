@@ -75,6 +75,25 @@ struct GridView {
   const uint32_t* cell_end;
 };
 
+// cells in the 3^D stencil around a cell
+template <int D>
+constexpr int kStencil = D == 3 ? 27 : 9;
+
+// the slot of stencil entry o (x fastest) around cell c in the layer's table, or false when
+// that cell lies outside the grid
+template <int D>
+CPS_HD CPS_INLINE bool stencil_slot(const GridSpec<D>& g, const int* c, int o, int layer, uint32_t& slot) {
+  int cc[D];
+  bool inside = true;
+  for (int k = 0; k < D; ++k) {
+    cc[k] = c[k] + (o % 3) - 1;
+    o /= 3;
+    inside = inside && cc[k] >= 0 && cc[k] < g.dims;
+  }
+  slot = morton_encode<D>(cc) + uint32_t(layer) * g.ncells;
+  return inside;
+}
+
 // visit every particle of the chosen layers within the support radius of xi (one thread;
 // core/lanes.h has the cooperative form a warp uses)
 template <int D, class Visitor>
@@ -82,21 +101,10 @@ CPS_HD CPS_INLINE void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi,
   int c[D];
   g.spec.cell_of(xi, c);
   const int nlayers = ghosts ? 2 : 1;
-  // the 3^D stencil of cells around c, x fastest
-  constexpr int kStencil = D == 3 ? 27 : 9;
-  for (int o = 0; o < kStencil; ++o) {
-    int cc[D];
-    int t = o;
-    bool inside = true;
-    for (int k = 0; k < D; ++k) {
-      cc[k] = c[k] + (t % 3) - 1;
-      t /= 3;
-      inside = inside && cc[k] >= 0 && cc[k] < g.spec.dims;
-    }
-    if (!inside) continue;
-    uint32_t m = morton_encode<D>(cc);
+  for (int o = 0; o < kStencil<D>; ++o) {
     for (int layer = 0; layer < nlayers; ++layer) {
-      uint32_t slot = m + uint32_t(layer) * g.spec.ncells;
+      uint32_t slot;
+      if (!stencil_slot(g.spec, c, o, layer, slot)) break;
       uint32_t end = g.cell_end[slot];
       for (uint32_t j = g.cell_start[slot]; j < end; ++j) {
         Vec<D> d = xi - g.pos[j];
