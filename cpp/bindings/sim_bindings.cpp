@@ -6,6 +6,7 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -124,9 +125,107 @@ struct PySim {
   std::unique_ptr<Sim> sim;
 };
 
+using Arr4 = std::array<float, 4>;
+Arr4 a4(const Quat& q) { return Arr4{q.w, q.x, q.y, q.z}; }
+Quat q4(const Arr4& a) { return Quat{a[0], a[1], a[2], a[3]}; }
+
+template <class T>
+T item(const nb::dict& d, const char* key) {
+  if (!d.contains(key)) throw nb::value_error((std::string("checkpoint: missing '") + key + "'").c_str());
+  return nb::cast<T>(d[key]);
+}
+
+// the scalars of a checkpoint, exactly (float32 values are exact as Python floats; the
+// die's angular velocity stays in its body frame)
+nb::dict scalars_of(const Globals& g) {
+  nb::dict d;
+  d["time"] = g.time;
+  d["step"] = g.step;
+  d["dt"] = g.dt;
+  d["rebuilds"] = g.rebuilds;
+  d["die_position"] = a3(g.die.x);
+  d["die_velocity"] = a3(g.die.v);
+  d["die_orientation"] = a4(g.die.q);
+  d["die_angular_velocity_body"] = a3(g.die.w_body);
+  d["shell_orientation"] = a4(g.shell_q);
+  d["shell_angular_velocity"] = a3(g.shell_omega);
+  d["control_acceleration"] = a3(g.user_acc);
+  d["control_torque"] = a3(g.user_torque);
+  d["sums_vmax2"] = g.sums.vmax2;
+  d["sums_amax2"] = g.sums.amax2;
+  d["sums_rho_err"] = g.sums.rho_err;
+  d["sums_rho_sum"] = g.sums.rho_sum;
+  d["sums_ke"] = g.sums.ke;
+  d["sums_force"] = a3(g.sums.force);
+  d["sums_torque"] = a3(g.sums.torque);
+  d["sums_contacts"] = g.sums.contacts;
+  return d;
+}
+
+// a checkpoint's scalars over the current globals (which keep the end time)
+Globals globals_from(const nb::dict& d, Globals g) {
+  g.time = item<double>(d, "time");
+  g.step = item<long long>(d, "step");
+  g.dt = item<float>(d, "dt");
+  g.rebuilds = item<long long>(d, "rebuilds");
+  g.die.x = v3(item<Arr3>(d, "die_position"));
+  g.die.v = v3(item<Arr3>(d, "die_velocity"));
+  g.die.q = q4(item<Arr4>(d, "die_orientation"));
+  g.die.w_body = v3(item<Arr3>(d, "die_angular_velocity_body"));
+  g.shell_q = q4(item<Arr4>(d, "shell_orientation"));
+  g.shell_omega = v3(item<Arr3>(d, "shell_angular_velocity"));
+  g.user_acc = v3(item<Arr3>(d, "control_acceleration"));
+  g.user_torque = v3(item<Arr3>(d, "control_torque"));
+  g.sums.vmax2 = item<float>(d, "sums_vmax2");
+  g.sums.amax2 = item<float>(d, "sums_amax2");
+  g.sums.rho_err = item<float>(d, "sums_rho_err");
+  g.sums.rho_sum = item<float>(d, "sums_rho_sum");
+  g.sums.ke = item<float>(d, "sums_ke");
+  g.sums.force = v3(item<Arr3>(d, "sums_force"));
+  g.sums.torque = v3(item<Arr3>(d, "sums_torque"));
+  g.sums.contacts = item<int>(d, "sums_contacts");
+  g.pending = g.sums;
+  g.done = g.time >= g.end_time;
+  g.bad = 0;
+  g.bad_step = -1;
+  g.rebuild[0] = g.rebuild[1] = 0;  // the restored state's first step sorts and relists
+  return g;
+}
+
+template <class T>
+nb::ndarray<nb::numpy> host_array(const std::vector<T>& v, int ndim) {
+  auto* buf = new T[v.size() > 0 ? v.size() : 1];
+  std::memcpy(buf, v.data(), v.size() * sizeof(T));
+  nb::capsule owner(buf, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+  size_t shape[2] = {v.size(), 3};
+  if constexpr (std::is_same_v<T, Vec3>)
+    return nb::ndarray<nb::numpy>(buf, 2, shape, owner, nullptr, nb::dtype<float>());
+  else
+    return nb::ndarray<nb::numpy>(buf, ndim, shape, owner, nullptr, nb::dtype<T>());
+}
+
+// Python signals (Ctrl-C) are looked at every 50 ms while stepping; a raised one stops
+// the stepping after a whole step and is re-raised once the GIL is back
+struct SignalCheck {
+  using clock = std::chrono::steady_clock;
+  clock::time_point last = clock::now();
+  bool raised = false;
+  bool operator()() {
+    auto now = clock::now();
+    if (now - last < std::chrono::milliseconds(50)) return false;
+    last = now;
+    nb::gil_scoped_acquire acquire;
+    if (PyErr_CheckSignals() != 0) raised = true;
+    return raised;
+  }
+};
+
 }  // namespace
 
 void bind_sim(nb::module_& m) {
+  m.def("bytes_available", [](const std::string& backend) {
+    return backend == "cuda" ? bytes_available_cuda() : bytes_available_cpu();
+  }, nb::arg("backend"), "Bytes the backend can allocate now (host MemAvailable, or the GPU's free memory).");
   nb::class_<PySim>(m, "Magic8Ball", "A Magic 8-Ball simulation on one backend (serial, cpu or cuda).")
       .def("__init__",
            [](PySim* self, const std::string& backend, nb::dict params,
@@ -151,9 +250,39 @@ void bind_sim(nb::module_& m) {
       .def_prop_ro("grid_bits", [](PySim& s) { return s.sim->model().grid.bits; })
       .def_prop_ro("sound_speed", [](PySim& s) { return s.sim->model().c0; })
       .def("step", [](PySim& s, long long n) {
-             nb::gil_scoped_release r;
-             s.sim->step(n);
-           }, nb::arg("n") = 1, "Advance n steps (no-ops once end_time is reached).")
+             SignalCheck check;
+             long long taken = 0;
+             {
+               nb::gil_scoped_release r;
+               taken = s.sim->step(n, [&check] { return check(); });
+             }
+             if (check.raised) throw nb::python_error();
+             return taken;
+           }, nb::arg("n") = 1,
+           "Advance up to n steps; returns the steps taken (none once the end time is reached or the "
+           "run went unsound). A Python signal (Ctrl-C) stops it after a whole step and is raised.")
+      .def("checkpoint", [](PySim& s) {
+             CheckpointState c = s.sim->checkpoint();
+             nb::dict d = scalars_of(c.g);
+             d["position"] = host_array(c.pos, 2);
+             d["velocity"] = host_array(c.vel, 2);
+             d["id"] = host_array(c.id, 1);
+             return d;
+           }, "The state the next step reads (fluid arrays in their current order, scalars); the next step relists.")
+      .def("restore", [](PySim& s, nb::dict d,
+                         nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> pos,
+                         nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> vel,
+                         nb::ndarray<const int, nb::shape<-1>, nb::c_contig, nb::device::cpu> ids) {
+             CheckpointState c;
+             c.pos = to_vec3(pos);
+             c.vel = to_vec3(vel);
+             c.id.assign(ids.data(), ids.data() + ids.shape(0));
+             c.g = globals_from(d, s.sim->globals());
+             s.sim->restore(c);
+           }, nb::arg("scalars"), nb::arg("positions"), nb::arg("velocities"), nb::arg("ids"),
+           "Replace the whole state by a checkpoint's (scalars as checkpoint() returns them).")
+      .def_static("bytes_needed", [](nb::dict params) { return bytes_needed(build_model(params)); },
+                  nb::arg("params"), "Bytes a simulation with these parameters allocates.")
       .def("evaluate", [](PySim& s) { s.sim->evaluate(); },
            "Compute densities, forces and reductions for the current state without advancing.")
       .def("state", [](PySim& s) {
@@ -180,7 +309,7 @@ void bind_sim(nb::module_& m) {
              d["die_torque"] = a3(g.sums.torque);
              d["die_contacts"] = g.sums.contacts;
              d["answer_face"] = window_face(g.die.q);
-             d["chosen_dt"] = sums_dt(s.sim->model(), g);  // what a finalize would choose from these sums
+             d["chosen_dt"] = sums_dt(s.sim->model(), g.sums, g.die);  // what a finalize would choose from these sums
              return d;
            }, "Scalars of the current state (time, dt, die pose, reductions of the last evaluation).")
       .def("set_control", [](PySim& s, Arr3 acc, Arr3 torque) {

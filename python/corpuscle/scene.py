@@ -21,6 +21,7 @@ import copy
 import difflib
 import json
 import math
+import numbers
 import os
 import pathlib
 import re
@@ -167,6 +168,8 @@ def _fmt_bound(x: float | int) -> str:
 
 def _fmt_value(v: Any) -> str:
     """Format a value the way it would be written in TOML, on one line."""
+    if getattr(v, "ndim", None) == 0 and hasattr(v, "item"):
+        v = v.item()  # a NumPy scalar
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -202,8 +205,18 @@ def _suggest(word: str, candidates: Iterable[str]) -> str | None:
 # ---------------------------------------------------------------------------
 
 
+def _is_bool(v: Any) -> bool:
+    # Python's bool and NumPy's bool_ (which is not a subclass of it)
+    return isinstance(v, bool) or type(v).__name__ == "bool_"
+
+
+def _is_integer(v: Any) -> bool:
+    # Python ints and NumPy integer scalars (numbers.Integral), never bools
+    return isinstance(v, numbers.Integral) and not _is_bool(v)
+
+
 def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    return isinstance(v, numbers.Real) and not _is_bool(v)
 
 
 def _in_range(x: float, spec: KeySpec) -> bool:
@@ -229,19 +242,21 @@ def check_value(key: str, spec: KeySpec, value: Any) -> Any:
             raise bad()
         return float(value)
     if t == "int":
-        if not isinstance(value, int) or isinstance(value, bool) or not _in_range(value, spec):
+        if not _is_integer(value) or not _in_range(value, spec):
             raise bad()
         return int(value)
     if t == "bool":
-        if not isinstance(value, bool):
+        if not _is_bool(value):
             raise bad()
-        return value
+        return bool(value)
     if t == "str":
         if not isinstance(value, str) or (spec.choices and value not in spec.choices):
             raise bad()
         return value
     # vectors: exactly 3 finite numbers, each within the bounds
     if t == "vec3":
+        if hasattr(value, "tolist") and not isinstance(value, (list, tuple)):
+            value = value.tolist()  # a NumPy array of three numbers
         if not isinstance(value, (list, tuple)) or len(value) != 3:
             raise bad()
         for x in value:

@@ -6,11 +6,13 @@ validated scene into the core's parameters and initial state, and reads results 
 from __future__ import annotations
 
 import math
+import numbers
+import time as _time
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Simulation", "BackendError", "UnstableRunError", "BACKENDS"]
+__all__ = ["Simulation", "BackendError", "UnstableRunError", "MemoryNeedError", "BACKENDS"]
 
 BACKENDS = ("auto", "serial", "cpu", "cuda")
 
@@ -28,6 +30,49 @@ class UnstableRunError(RuntimeError):
     def __init__(self, step: int, message: str):
         super().__init__(message)
         self.step = step
+
+
+class MemoryNeedError(ValueError):
+    """A scene needs more memory than the backend has; the message names the keys."""
+
+
+# the reasons a run is stopped as unstable, by the core's code (kBad* in magic8ball.h)
+UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)",
+                    2: "the die's state became non-finite (NaN/inf)",
+                    3: "a particle moved faster than 100 times the sound speed",
+                    4: "a particle had more neighbours than its list holds (the fluid collapsed)"}
+
+# the scalars of a checkpoint (Simulation.checkpoint), as the core names them
+CHECKPOINT_ARRAYS = ("position", "velocity", "id")
+
+
+def _count(name: str, value, minimum: int = 0) -> int:
+    """An integer argument (Python or NumPy integer, not bool or float) >= minimum."""
+    if isinstance(value, bool) or type(value).__name__ == "bool_" or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer, got {value!r}")
+    if int(value) < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {int(value)}")
+    return int(value)
+
+
+def _finite_vector(name: str, value, length: int = 3) -> list[float]:
+    """`length` finite numbers."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be {length} numbers, got {value!r}") from None
+    if arr.shape != (length,):
+        raise ValueError(f"{name} must be {length} numbers, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    return [float(x) for x in arr]
+
+
+def _fmt_bytes(b: float) -> str:
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if b >= size:
+            return f"{b / size:.3g} {unit}"
+    return f"{b / 1e3:.3g} kB"
 
 
 def _core():
@@ -73,12 +118,17 @@ class Simulation:
     with :meth:`rigid_poses`; push shaking input with :meth:`set_control`.
     """
 
-    def __init__(self, scene, backend: str = "auto"):
+    def __init__(self, scene, backend: str = "auto", checkpoint: dict | None = None):
         self.scene = scene
         self.backend = resolve_backend(backend)
         if scene.kind != "magic8ball":
             raise BackendError(f"scene kind {scene.kind!r} is not supported by this version")
-        self._build_magic8ball()
+        t0 = _time.perf_counter()
+        self._build_magic8ball(checkpoint)
+        if checkpoint is not None:
+            self.restore(checkpoint)
+        #: seconds spent building the scene (placement, allocation, upload), excluded from steps/s
+        self.init_seconds = _time.perf_counter() - t0
 
     # construction ---------------------------------------------------------------------
     @classmethod
@@ -107,7 +157,7 @@ class Simulation:
         """Whether the CUDA backend is compiled and a device is usable."""
         return cuda_status()[0]
 
-    def _build_magic8ball(self) -> None:
+    def _build_magic8ball(self, checkpoint: dict | None = None) -> None:
         v = self.scene.values
         n = int(v["fluid.particles"])
         radius = float(v["container.radius"])
@@ -123,9 +173,17 @@ class Simulation:
         die_q = _random_quaternion(rng)
         die_pos = np.asarray(v["die.position"], dtype=np.float32)
         margin = float(v["die.contact_margin"]) * h
-        # fluid fills the sphere outside the die's contact margin
-        pos, spacing = _core().poisson_disk_sphere(radius, n, die_pos.tolist(), [half] * 3, die_q.tolist(),
-                                                   margin, seed)
+        if checkpoint is None:
+            # fluid fills the sphere outside the die's contact margin
+            pos, spacing = _core().poisson_disk_sphere(radius, n, die_pos.tolist(), [half] * 3, die_q.tolist(),
+                                                       margin, seed)
+        else:
+            # a resumed run starts from its checkpoint's particles (restored below)
+            pos = np.ascontiguousarray(checkpoint["position"], dtype=np.float32)
+            spacing = float(checkpoint.get("spacing", 0.0))
+            if pos.shape != (n, 3):
+                raise ValueError(f"checkpoint: {pos.shape[0] if pos.ndim else 0} particles, the scene has "
+                                 f"fluid.particles = {n}")
         fluid_volume = 4.0 / 3.0 * math.pi * radius ** 3 - side ** 3
         self.h = h
         self.spacing = float(spacing)
@@ -158,26 +216,42 @@ class Simulation:
         params["rebuild_distance"] = skin * h / (1.0 + stretch)
         # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
         # a few percent; a list that still overflows stops the run as unstable), in warp widths
+        # and never more than every particle and ghost there is
         def capacity(reach):
             mean = 4.0 / 3.0 * math.pi * reach ** 3 * n / fluid_volume
-            return int(math.ceil((2.5 * mean + 32) / 32.0)) * 32
+            return min(int(math.ceil((2.5 * mean + 32) / 32.0)), int(math.ceil(2 * n / 32.0))) * 32
 
         params["max_neighbors"] = capacity(list_radius)
         params["max_near"] = capacity(h)
         self.params = params
         die = {"position": die_pos.tolist(), "velocity": [0.0] * 3, "orientation": die_q.tolist(),
                "angular_velocity": [0.0] * 3}
+        self._check_memory(params)
         vel = np.zeros_like(pos)
         self._sim = _core().Magic8Ball(self.backend, params, np.ascontiguousarray(pos), vel, die)
         self.end_time = float(v["run.end_time"])
         self.answers = list(v["die.answers"])
 
+    def _check_memory(self, params: dict) -> None:
+        """Fail before allocating when the scene needs more memory than the backend has."""
+        need = float(_core().Magic8Ball.bytes_needed(params))
+        have = float(_core().bytes_available(self.backend))
+        if have > 0 and need > have:
+            v = self.scene.values
+            keys = ", ".join(f"{k}={v[k]!r}".replace("True", "true").replace("False", "false")
+                             for k in ("fluid.particles", "sph.h", "sph.scale_h", "sph.skin"))
+            where = "GPU memory free" if self.backend == "cuda" else "host memory available"
+            raise MemoryNeedError(f"{keys} need {_fmt_bytes(need)} ({params['max_neighbors']} neighbour "
+                                  f"slots per particle), more than the {_fmt_bytes(have)} of {where}")
+
     # stepping -------------------------------------------------------------------------
-    def step(self, n: int = 1) -> None:
-        """Advance n steps (steps after a run's end time, set by :meth:`run`, are no-ops)."""
-        if n < 0:
-            raise ValueError(f"steps must be >= 0, got {n}")
-        self._sim.step(int(n))
+    def step(self, n: int = 1) -> int:
+        """Advance up to n steps; returns how many were taken. Once the end time (set by
+        :meth:`run` or :meth:`set_end_time`) is reached, or the run went unstable, steps are
+        no-ops that cost (almost) nothing and are not counted. Ctrl-C stops it after a whole
+        step (KeyboardInterrupt)."""
+        n = _count("steps", n)
+        return int(self._sim.step(n))
 
     def run(self, until: float | None = None, steps: int | None = None, chunk: int = 100,
             callback=None) -> None:
@@ -186,13 +260,17 @@ class Simulation:
         `callback(sim)` is called after every `chunk` steps; it may return True to stop.
         """
         if until is not None:
-            self._sim.set_end_time(float(until))
-        budget = steps if steps is not None else (None if until is not None else 0)
+            until = float(until)
+            if not math.isfinite(until):
+                raise ValueError(f"until must be a finite time, got {until!r}")
+            self._sim.set_end_time(until)
+        budget = _count("steps", steps) if steps is not None else (None if until is not None else 0)
+        chunk = _count("chunk", chunk, minimum=1)
         while True:
             k = chunk if budget is None else min(chunk, budget)
             if k <= 0:
                 break
-            self._sim.step(k)
+            taken = self.step(k)
             if budget is not None:
                 budget -= k
             st = self._sim.state()
@@ -200,17 +278,20 @@ class Simulation:
                 raise UnstableRunError(st["bad_step"], self.check_health() or "unstable")
             if callback is not None and callback(self):
                 break
-            if st["done"]:
+            if st["done"] or taken < k:
                 break
 
     def set_end_time(self, t: float) -> None:
-        """Steps that would pass simulated time t are shortened, then become no-ops."""
+        """Steps that would pass simulated time t are shortened, then become no-ops
+        (t = inf: no end)."""
+        if not isinstance(t, numbers.Real) or isinstance(t, bool) or math.isnan(t):
+            raise ValueError(f"end time must be a number of seconds, got {t!r}")
         self._sim.set_end_time(float(t))
 
     def set_control(self, acceleration=(0.0, 0.0, 0.0), torque=(0.0, 0.0, 0.0)) -> None:
         """Container linear acceleration (m/s²) and shell torque (N·m) for the next steps,
         added to the scene's shake schedule; every backend applies it identically."""
-        self._sim.set_control([float(x) for x in acceleration], [float(x) for x in torque])
+        self._sim.set_control(_finite_vector("acceleration", acceleration), _finite_vector("torque", torque))
 
     def evaluate(self) -> dict:
         """Compute densities, pressures, accelerations and this state's reductions without
@@ -219,10 +300,34 @@ class Simulation:
         return self._sim.state()
 
     def set_particles(self, positions, velocities=None) -> None:
-        """Replace the fluid state ((n, 3) arrays, n = n_particles); ids restart at 0..n-1."""
-        pos = np.ascontiguousarray(positions, dtype=np.float32)
-        vel = np.zeros_like(pos) if velocities is None else np.ascontiguousarray(velocities, dtype=np.float32)
+        """Replace the fluid state ((n, 3) arrays, n = n_particles, finite, positions inside
+        the container); ids restart at 0..n-1."""
+        n = self.n_particles
+        pos = self._particle_array("positions", positions, n)
+        vel = np.zeros_like(pos) if velocities is None else self._particle_array("velocities", velocities, n)
+        r = np.sqrt(np.einsum("ij,ij->i", pos.astype(np.float64), pos.astype(np.float64)))
+        radius = float(self.params["radius"])
+        outside = np.flatnonzero(r > radius * (1 + 1e-6))
+        if outside.size:
+            i = int(outside[0])
+            raise ValueError(f"positions[{i}] = {pos[i].tolist()} is outside the container (radius {radius} m, "
+                             f"{outside.size} particles outside)")
         self._sim.set_particles(pos, vel)
+
+    @staticmethod
+    def _particle_array(name: str, value, n: int) -> np.ndarray:
+        try:
+            arr = np.asarray(value)
+        except (TypeError, ValueError):
+            raise TypeError(f"{name} must be an ({n}, 3) array of numbers") from None
+        if arr.dtype.kind not in "iuf" or arr.shape != (n, 3):
+            raise ValueError(f"{name} must be an ({n}, 3) array of numbers, got shape {arr.shape} "
+                             f"dtype {arr.dtype}")
+        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f"{name}[{i}] = {arr[i].tolist()} is not finite ({bad.size} rows are not)")
+        return np.ascontiguousarray(arr, dtype=np.float32)
 
     def set_die(self, position=None, orientation=None, velocity=None, angular_velocity=None) -> None:
         """Set the die's pose (orientation as w, x, y, z) and velocities (container frame)."""
@@ -230,8 +335,40 @@ class Simulation:
         for key, val in (("position", position), ("orientation", orientation), ("velocity", velocity),
                          ("angular_velocity", angular_velocity)):
             if val is not None:
-                die[key] = [float(x) for x in val]
+                die[key] = _finite_vector(key, val, 4 if key == "orientation" else 3)
+        if np.linalg.norm(die["orientation"]) < 1e-6:
+            raise ValueError(f"orientation must be a non-zero quaternion, got {die['orientation']}")
+        if np.linalg.norm(die["position"]) > float(self.params["radius"]):
+            raise ValueError(f"position {die['position']} is outside the container "
+                             f"(radius {self.params['radius']} m)")
         self._sim.set_die(die)
+
+    # checkpoints ----------------------------------------------------------------------
+    def checkpoint(self) -> dict:
+        """The whole state the next step reads: ``position``, ``velocity``, ``id`` (fluid
+        arrays in their current order) and the scalars (time, step, die and shell state,
+        control, ...). Restoring it with :meth:`restore` (on this or a new simulation of the
+        same scene) continues bit-identically on the CPU backends: the step after a
+        checkpoint sorts and relists, as the first step after a restore does. The scene
+        draws no random numbers after its start, so there is no generator state to keep."""
+        c = dict(self._sim.checkpoint())
+        c["spacing"] = self.spacing
+        return c
+
+    def restore(self, state: dict) -> None:
+        """Replace the whole state by one :meth:`checkpoint` returned (the end time stays)."""
+        missing = [k for k in CHECKPOINT_ARRAYS if k not in state]
+        if missing:
+            raise ValueError(f"checkpoint: missing {', '.join(missing)}")
+        n = self.n_particles
+        pos = self._particle_array("checkpoint position", state["position"], n)
+        vel = self._particle_array("checkpoint velocity", state["velocity"], n)
+        ids = np.ascontiguousarray(state["id"]).reshape(-1)
+        if ids.shape != (n,) or ids.dtype.kind not in "iu" or np.any(np.sort(ids) != np.arange(n)):
+            raise ValueError(f"checkpoint id must be a permutation of 0..{n - 1}")
+        scalars = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in state.items()
+                   if k not in CHECKPOINT_ARRAYS and k != "spacing"}
+        self._sim.restore(scalars, pos, vel, ids.astype(np.int32))
 
     # state ----------------------------------------------------------------------------
     def state(self) -> dict:
@@ -343,21 +480,17 @@ class Simulation:
     def check_health(self) -> str | None:
         """None while the run is sound, else a message naming the step where it went bad."""
         st = self._sim.state()
-        reasons = {1: "a particle position or velocity became non-finite (NaN/inf)",
-                   2: "the die's state became non-finite (NaN/inf)",
-                   3: "a particle moved faster than 100 times the sound speed",
-                   4: "a particle had more neighbours than its list holds (the fluid collapsed)"}
         if st["bad"]:
-            return f"unstable at step {st['bad_step']}: {reasons.get(st['bad'], 'unsound state')}"
+            return f"unstable at step {st['bad_step']}: {UNSTABLE_REASONS.get(st['bad'], 'unsound state')}"
         return None
 
     # measurement ----------------------------------------------------------------------
     def bench_steps(self, n: int) -> float:
         """Seconds for n steps, timed by the core (CUDA events on the GPU), init excluded."""
         self._sim.set_end_time(math.inf)
-        return float(self._sim.bench(int(n)))
+        return float(self._sim.bench(_count("steps", n, minimum=1)))
 
     def stage_times(self, n: int) -> dict[str, float]:
         """Milliseconds per step of each pipeline stage, averaged over n steps."""
         self._sim.set_end_time(math.inf)
-        return dict(self._sim.profile(int(n)))
+        return dict(self._sim.profile(_count("steps", n, minimum=1)))

@@ -120,6 +120,11 @@ struct CpuExec {
   void to_device(void* dst, const void* src, size_t bytes) const { std::memcpy(dst, src, bytes); }
   void synchronize() const {}
 
+  // scalar snapshots between batches of steps: the CPU's memory is the host's, so a
+  // snapshot is the buffer itself
+  void poll_begin(int slot, const void* src, size_t /*bytes*/) { poll_[slot & 1] = src; }
+  const void* poll_wait(int slot) const { return poll_[slot & 1]; }
+
   // a whole step: CPU runs it directly
   template <class F>
   void launch_step(int /*parity*/, const F& enqueue) { enqueue(); }
@@ -150,6 +155,7 @@ struct CpuExec {
  private:
   using clock = std::chrono::steady_clock;
   std::vector<int> order_;
+  const void* poll_[2] = {nullptr, nullptr};
   bool prof_ = false;
   clock::time_point t_last_;
   std::vector<double> stage_ms_;

@@ -143,10 +143,13 @@ struct CudaExec {
   }
   CudaExec(CudaExec&& o) noexcept
       : stream_(std::exchange(o.stream_, nullptr)), temp_(std::exchange(o.temp_, nullptr)),
-        temp_bytes_(std::exchange(o.temp_bytes_, 0)), counter_(std::exchange(o.counter_, nullptr)) {
+        temp_bytes_(std::exchange(o.temp_bytes_, 0)), counter_(std::exchange(o.counter_, nullptr)),
+        poll_bytes_(std::exchange(o.poll_bytes_, 0)) {
     for (int p = 0; p < 2; ++p) {
       graph_[p] = std::exchange(o.graph_[p], nullptr);
       eager_[p] = o.eager_[p];
+      poll_host_[p] = std::exchange(o.poll_host_[p], nullptr);
+      poll_event_[p] = std::exchange(o.poll_event_[p], nullptr);
     }
   }
   CudaExec(const CudaExec&) = delete;
@@ -156,6 +159,10 @@ struct CudaExec {
     for (auto& e : events_) cudaEventDestroy(e.second);
     if (temp_) cudaFree(temp_);
     if (counter_) cudaFree(counter_);
+    for (int k = 0; k < 2; ++k) {
+      if (poll_host_[k]) cudaFreeHost(poll_host_[k]);
+      if (poll_event_[k]) cudaEventDestroy(poll_event_[k]);
+    }
     if (stream_) cudaStreamDestroy(stream_);
   }
 
@@ -263,6 +270,28 @@ struct CudaExec {
   }
   void synchronize() { CPS_CUDA_CHECK(cudaStreamSynchronize(stream_)); }
 
+  // scalar snapshots between batches of steps: an asynchronous copy into pinned host
+  // memory (two slots, so one is read while the other is written) and an event per slot
+  void poll_begin(int slot, const void* src, size_t bytes) {
+    slot &= 1;
+    if (bytes > poll_bytes_) {
+      synchronize();
+      for (int k = 0; k < 2; ++k) {
+        if (poll_host_[k]) CPS_CUDA_CHECK(cudaFreeHost(poll_host_[k]));
+        CPS_CUDA_CHECK(cudaMallocHost(&poll_host_[k], bytes));
+        if (!poll_event_[k]) CPS_CUDA_CHECK(cudaEventCreateWithFlags(&poll_event_[k], cudaEventDisableTiming));
+      }
+      poll_bytes_ = bytes;
+    }
+    CPS_CUDA_CHECK(cudaMemcpyAsync(poll_host_[slot], src, bytes, cudaMemcpyDeviceToHost, stream_));
+    CPS_CUDA_CHECK(cudaEventRecord(poll_event_[slot], stream_));
+  }
+  const void* poll_wait(int slot) {
+    slot &= 1;
+    CPS_CUDA_CHECK(cudaEventSynchronize(poll_event_[slot]));
+    return poll_host_[slot];
+  }
+
   // a whole step: the first step of each parity runs eagerly (allocating CUB's temporary
   // storage), later ones replay a CUDA graph captured once per parity
   template <class F>
@@ -349,6 +378,9 @@ struct CudaExec {
   void* temp_ = nullptr;
   size_t temp_bytes_ = 0;
   unsigned* counter_ = nullptr;  // blocks finished, for the fused reduction
+  void* poll_host_[2] = {nullptr, nullptr};
+  cudaEvent_t poll_event_[2] = {nullptr, nullptr};
+  size_t poll_bytes_ = 0;
   cudaGraphExec_t graph_[2] = {nullptr, nullptr};
   int eager_[2] = {0, 0};
   bool graphs_ = true;

@@ -38,5 +38,15 @@ std::unique_ptr<Sim> make_cuda(const Model& m, const InitialState& s) {
   return std::make_unique<SimImpl<CudaExec>>(CudaExec(), m, s);
 }
 
+// free memory of device 0
+double bytes_available_cuda() {
+  std::string err;
+  if (cuda_device_list(err).empty()) return 0.0;
+  CPS_CUDA_CHECK(cudaSetDevice(0));
+  size_t free_b = 0, total_b = 0;
+  CPS_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
+  return double(free_b);
+}
+
 }  // namespace m8
 }  // namespace cps

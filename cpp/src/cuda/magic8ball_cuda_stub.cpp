@@ -14,6 +14,7 @@ namespace m8 {
 std::unique_ptr<Sim> make_cuda(const Model&, const InitialState&) {
   throw Error("this corpuscle build has no CUDA backend (built with CORPUSCLE_CUDA=OFF or no CUDA compiler)");
 }
+double bytes_available_cuda() { return 0.0; }
 }  // namespace m8
 
 }  // namespace cps

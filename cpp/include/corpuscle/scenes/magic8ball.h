@@ -81,7 +81,7 @@ struct SumsOp {
   CPS_HD StepSums operator()(const StepSums& a, const StepSums& b) const { return StepSums::combine(a, b); }
 };
 
-// reasons a run is stopped as unstable
+// reasons a run is stopped as unstable (the first one raised is kept)
 constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
 constexpr int kBadDie = 2;        // the die's state went non-finite
 constexpr int kBadSpeed = 3;      // a speed passed 100 times the sound speed
@@ -94,15 +94,18 @@ struct Globals {
   long long step;
   float dt;              // the dt of the last step
   int n_ghost;
-  int done;              // end_time reached
-  int bad;               // why the run is unsound (kBad*), 0 while it is sound
-  long long bad_step;
+  int done;              // end_time reached: later steps are no-ops
+  int bad;               // why the run is unsound (kBad*, the first raised), 0 while it is sound;
+                         // once raised, later steps are no-ops
+  long long bad_step;    // the step that went bad (the state is kept at bad_step - 1 when the
+                         // failure was found before integrating, at bad_step when after)
   RigidState die;
   Quat shell_q;          // container orientation (container -> lab)
   Vec3 shell_omega;      // container angular velocity (container frame)
   FrameMotion frame;     // this step's container-frame terms
   Vec3 user_acc, user_torque;  // control set through the API, added to the schedule
-  StepSums sums;         // this step's reductions
+  StepSums sums;         // the reductions of the last step taken (or evaluation)
+  StepSums pending;      // this step's reductions, kept in sums once the step is taken
   int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (raised by step s - 1)
   long long rebuilds;    // steps that sorted and relisted
 };
@@ -146,6 +149,21 @@ CPS_HD CPS_INLINE void raise_flag(int* p, int code) {
   }
 #endif
 }
+
+// raise an instability reason: the first one raised stays (each stage raises one reason,
+// so the kept reason is that of the earliest stage that found a fault)
+CPS_HD CPS_INLINE void raise_first(int* p, int code) {
+#ifdef __CUDA_ARCH__
+  atomicCAS(p, 0, code);
+#else
+  int zero = 0;
+  __atomic_compare_exchange_n(p, &zero, code, false, __ATOMIC_RELAXED, __ATOMIC_RELAXED);
+#endif
+}
+
+// a scene whose run is over (end time reached) or unsound: its steps are no-ops that only
+// carry the arrays over
+CPS_HD CPS_INLINE bool halted(const Globals* g) { return g->done != 0 || g->bad != 0; }
 
 // cell keys of fluid particle i at x and of its ghost slot n + i, with identity values
 CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x) {
@@ -218,7 +236,7 @@ struct ReorderStage {
   CPS_HD void operator()(int j) const {
     const Model& m = *model;
     const int n = m.n_fluid, cap = 2 * n;
-    if (!rebuilding(g)) {
+    if (!rebuilding(g) || halted(g)) {
       if (j < n + g->n_ghost) {
         a.pos_alt[j] = a.pos[j];
         a.vel_alt[j] = a.vel[j];
@@ -267,6 +285,7 @@ struct DensityStage {
   GridView<D> grid;
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
+    if (halted(g)) return;
     const Model& m = *model;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
@@ -287,7 +306,7 @@ struct DensityStage {
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
     a.near_count[i] = kept;
-    if (count > m.max_neighbors || kept > m.max_near) raise_flag(&g->bad, kBadNeighbors);
+    if (count > m.max_neighbors || kept > m.max_near) raise_first(&g->bad, kBadNeighbors);
     if (rebuild) {
       a.nbr_count[i] = count;
       a.ghost_slot[i] = a.ghost_of[a.perm[i]];
@@ -316,6 +335,7 @@ struct ForceStage {
   GridView<D> grid;
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
+    if (halted(g)) return;  // the reduction of a step not taken is discarded
     const Model& m = *model;
     ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
     Vec3 x = a.pos[i];
@@ -349,11 +369,13 @@ struct ForceStage {
   }
 };
 
-// the largest speed of this step (fluid or die), and the dt the step's reductions select,
-// before the end-time clipping
-CPS_HD CPS_INLINE float max_speed(const Globals& g) { return fmax2(fsqrt(g.sums.vmax2), norm(g.die.v)); }
-CPS_HD CPS_INLINE float sums_dt(const Model& m, const Globals& g) {
-  return choose_dt(m.dt, m.h, max_speed(g), fsqrt(g.sums.amax2), m.c0, m.sph.viscosity / m.sph.rest_density);
+// the largest speed of a step (fluid or die), and the dt its reductions select, before the
+// end-time clipping
+CPS_HD CPS_INLINE float max_speed(const StepSums& s, const RigidState& die) {
+  return fmax2(fsqrt(s.vmax2), norm(die.v));
+}
+CPS_HD CPS_INLINE float sums_dt(const Model& m, const StepSums& s, const RigidState& die) {
+  return choose_dt(m.dt, m.h, max_speed(s, die), fsqrt(s.amax2), m.c0, m.sph.viscosity / m.sph.rest_density);
 }
 
 // stage 5 (one item per scene): dt, die and container integration, clock
@@ -363,32 +385,52 @@ struct FinalizeStage {
   CPS_HD void operator()(int) const {
     const Model& m = *model;
     Globals& G = *g;
-    G.rebuilds += G.rebuild[G.step & 1];
-    G.rebuild[G.step & 1] = 0;  // this step's readers are done with its flag
     if (G.done || G.time >= G.end_time) {
       G.done = 1;
       G.dt = 0.0f;
       return;
     }
-    float dt = sums_dt(m, G);
+    if (G.bad) {
+      // found before integrating (this step's lists overflowed), or raised by the last
+      // step's integration: the kept state is the last one integrated
+      if (G.bad_step < 0) G.bad_step = G.bad == kBadNeighbors ? G.step + 1 : G.step;
+      G.dt = 0.0f;
+      return;
+    }
+    G.rebuilds += G.rebuild[G.step & 1];
+    G.rebuild[G.step & 1] = 0;  // this step's readers are done with its flag
+    const StepSums& S = G.pending;
+    float dt = sums_dt(m, S, G.die);
     const bool last = G.time + double(dt) >= G.end_time;
     if (last) dt = float(G.end_time - G.time);
-    if (!finite(G.sums.vmax2) || !finite(G.sums.amax2)) G.bad = kBadParticles;
-    else if (max_speed(G) > 100.0f * m.c0) G.bad = kBadSpeed;
+    // faults found before integrating: the step is not taken, the state stays sound
+    int fault = 0;
+    if (!finite(S.vmax2) || !finite(S.amax2)) fault = kBadParticles;
+    else if (max_speed(S, G.die) > 100.0f * m.c0) fault = kBadSpeed;
     // the die under the fluid's reaction, then kept inside the sphere
-    integrate_box(m.die, m.body, G.frame, G.sums.force, G.sums.torque, dt, G.die);
-    keep_box_in_sphere(m.die, m.wall.radius, m.body.restitution, G.die);
-    const RigidState& d = G.die;
-    if (!finite(d.x[0] + d.x[1] + d.x[2] + d.v[0] + d.v[1] + d.v[2] + d.q.w + d.q.x + d.q.y + d.q.z +
-                d.w_body[0] + d.w_body[1] + d.w_body[2]))
-      G.bad = kBadDie;
+    RigidState d = G.die;
+    if (!fault) {
+      integrate_box(m.die, m.body, G.frame, S.force, S.torque, dt, d);
+      keep_box_in_sphere(m.die, m.wall.radius, m.body.restitution, d);
+      if (!finite(d.x[0] + d.x[1] + d.x[2] + d.v[0] + d.v[1] + d.v[2] + d.q.w + d.q.x + d.q.y + d.q.z +
+                  d.w_body[0] + d.w_body[1] + d.w_body[2]))
+        fault = kBadDie;
+    }
+    if (fault) {
+      G.bad = fault;
+      G.bad_step = G.step + 1;
+      G.dt = 0.0f;
+      return;
+    }
+    G.die = d;
+    G.sums = S;
     // the container shell: angular velocity and orientation
     G.shell_omega += G.frame.alpha * dt;
     G.shell_q = qintegrate_body(G.shell_q, G.shell_omega, dt);
     G.dt = dt;
     G.time = last ? G.end_time : G.time + double(dt);  // land exactly on the end time
+    G.done = last ? 1 : 0;                              // and stop there: later steps are no-ops
     G.step += 1;
-    if (G.bad && G.bad_step < 0) G.bad_step = G.step;
   }
 };
 
@@ -401,12 +443,15 @@ struct IntegrateStage {
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
     Vec3 x = Vec3::zero();
-    if (i < m.n_fluid) {
+    // a step that was not taken (halted before integrating) leaves the particles as they are
+    const bool taken = g->dt > 0.0f;
+    if (i < m.n_fluid && !taken) x = a.pos[i];
+    if (i < m.n_fluid && taken) {
       float dt = g->dt;
       Vec3 v = a.vel[i] + a.acc[i] * dt;
       x = a.pos[i] + (v + a.xsph[i]) * dt;
       reflect_at_wall(m.wall, x, v);
-      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_flag(&g->bad, kBadParticles);
+      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&g->bad, kBadParticles);
       a.pos[i] = x;
       a.vel[i] = v;
       // the ghost follows its particle between rebuilds

@@ -1,6 +1,7 @@
 // Host orchestration of the Magic 8-Ball step, written once for every backend (Exec).
 // Exec supplies buffers, parallel_for (for_each / single), sort, reduce, copies and timing.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -17,7 +18,21 @@ constexpr int kNumStages = 4;
 template <class Exec>
 class SimImpl final : public Sim {
  public:
+  static constexpr int kPollBatch = 16;  // steps between scalar snapshots on a device
   template <class T> using Buf = typename Exec::template Buffer<T>;
+
+  // the bytes the buffers below take (the sort's scratch included), for a check before
+  // anything is allocated
+  static double bytes_needed(const Model& m) {
+    const double n = m.n_fluid, cap = 2.0 * n;
+    const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + 2 * sizeof(uint32_t) +
+                            2 * sizeof(int);
+    const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int) +
+                             sizeof(int) * (double(m.max_neighbors) + double(m.max_near));
+    const double cells = 2.0 * 2.0 * double(m.grid.ncells) * sizeof(uint32_t);
+    const double sort_scratch = cap * (sizeof(uint32_t) + sizeof(int)) * 2.0;
+    return cap * per_slot + n * per_fluid + cells + sort_scratch;
+  }
 
   SimImpl(Exec ex, const Model& m, const InitialState& s) : ex_(std::move(ex)), m_(m) {
     const int n = m.n_fluid, cap = 2 * n;
@@ -59,7 +74,7 @@ class SimImpl final : public Sim {
     g.shell_q = Quat::identity();
     g.shell_omega = Vec3::zero();
     g.user_acc = g.user_torque = Vec3::zero();
-    g.sums = StepSums::identity();
+    g.sums = g.pending = StepSums::identity();
     ex_.to_device(g_.data(), &g, sizeof(Globals));
     set_particles(s.pos, s.vel);
   }
@@ -91,29 +106,98 @@ class SimImpl final : public Sim {
     keys_ready_ = false;  // the next step re-evaluates its frame from the new control
   }
 
-  void step(long long n) override {
-    for (long long k = 0; k < n; ++k) {
-      ensure_keys();
-      ex_.launch_step(parity_, [&] { enqueue_step(true); });
-      parity_ ^= 1;
+  // Steps are enqueued in batches; after each batch a snapshot of the scalars is copied back
+  // (asynchronously on a device), and the snapshot of the batch before is read before the
+  // next one is enqueued, so the device never waits for the host. A scene that is done or
+  // unsound makes its steps no-ops on the device, and the host stops enqueuing once a
+  // snapshot shows it: at most two batches of no-op steps follow the last real one.
+  long long step(long long n, const StopCheck& stop) override {
+    if (n <= 0) return 0;
+    const Globals g0 = globals();
+    if (halted(&g0)) return 0;
+    const long long first = g0.step;
+    const int batch = Exec::on_device ? kPollBatch : 1;
+    int slot = 0;
+    bool pending = false;
+    for (long long k = 0; k < n;) {
+      const long long b = std::min<long long>(batch, n - k);
+      for (long long j = 0; j < b; ++j) {
+        ensure_keys();
+        ex_.launch_step(parity_, [&] { enqueue_step(true); });
+        parity_ ^= 1;
+      }
+      sorted_ = true;
+      k += b;
+      ex_.poll_begin(slot, g_.data(), sizeof(Globals));
+      if (pending || !Exec::on_device) {
+        const int seen = Exec::on_device ? slot ^ 1 : slot;
+        if (halted(static_cast<const Globals*>(ex_.poll_wait(seen)))) break;
+      }
+      pending = true;
+      slot ^= 1;
+      if (stop && stop()) break;
     }
-    sorted_ = n > 0 || sorted_;
+    return globals().step - first;
   }
 
   void evaluate() override {
-    // the same stages as a step, without integration; dt is chosen from these forces
+    // the same stages as a step, without integration; dt is chosen from these forces.
+    // A finished or unsound run is evaluated too: its flags are lifted for the evaluation
+    Globals g0 = globals();
+    if (halted(&g0)) {
+      Globals g = g0;
+      g.done = g.bad = 0;
+      ex_.to_device(g_.data(), &g, sizeof(Globals));
+    }
     ensure_keys();
     ex_.launch_step(-1, [&] { enqueue_step(false); });
     keys_ready_ = false;
     parity_ ^= 1;
     sorted_ = true;
+    if (halted(&g0)) {
+      Globals g = globals();
+      g.done = g0.done;
+      g.bad = g0.bad;
+      ex_.to_device(g_.data(), &g, sizeof(Globals));
+    }
     ex_.synchronize();
   }
 
   double bench(long long n) override {
-    step(1);  // capture / warm the step outside the timing
+    step(1, {});  // capture / warm the step outside the timing
     ex_.synchronize();
-    return ex_.time([&] { step(n); });
+    return ex_.time([&] { step(n, {}); });
+  }
+
+  // the state the next step reads, in the current order: the fluid arrays and the scalars.
+  // The next step sorts and relists (as a restored state's first step does), so a run that
+  // checkpoints and the run resumed from that checkpoint take identical steps
+  CheckpointState checkpoint() override {
+    const int n = m_.n_fluid;
+    CheckpointState c;
+    c.pos.resize(n);
+    c.vel.resize(n);
+    c.id.resize(n);
+    ex_.synchronize();
+    ex_.to_host(c.pos.data(), pos_[parity_].data(), n * sizeof(Vec3));
+    ex_.to_host(c.vel.data(), vel_[parity_].data(), n * sizeof(Vec3));
+    ex_.to_host(c.id.data(), id_[parity_].data(), n * sizeof(int));
+    c.g = globals();
+    keys_ready_ = false;
+    return c;
+  }
+
+  void restore(const CheckpointState& c) override {
+    const int n = m_.n_fluid;
+    if (int(c.pos.size()) != n || int(c.vel.size()) != n || int(c.id.size()) != n)
+      throw Error("magic8ball: the checkpoint holds " + std::to_string(c.pos.size()) + " particles, the model " +
+                  std::to_string(n));
+    ex_.to_device(pos_[parity_].data(), c.pos.data(), n * sizeof(Vec3));
+    ex_.to_device(vel_[parity_].data(), c.vel.data(), n * sizeof(Vec3));
+    ex_.to_device(id_[parity_].data(), c.id.data(), n * sizeof(int));
+    ex_.to_device(g_.data(), &c.g, sizeof(Globals));
+    sorted_ = false;
+    keys_ready_ = false;
   }
 
   std::vector<std::pair<std::string, double>> profile(long long n) override {
@@ -192,7 +276,7 @@ class SimImpl final : public Sim {
     ex_.mark(1);
     // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
-      ex_.for_each_lanes_reduce_then(n, ForceStage{md, g, s, grid}, s.items, &g->sums, SumsOp{},
+      ex_.for_each_lanes_reduce_then(n, ForceStage{md, g, s, grid}, s.items, &g->pending, SumsOp{},
                                      StepSums::identity(), FinalizeStage{md, g});
       ex_.mark(2);
       // 5. integrate, then key the next step
