@@ -110,14 +110,24 @@ def test_info_without_core(capsys):
 @pytest.mark.parametrize(
     "argv",
     [["run"], ["run", "magic8ball", "--backend", "gpu"], ["bench", "magic8ball", "--backend", "auto"], ["nosuchcmd"],
-     ["run", "magic8ball", "--steps", "3", "--time", "1"], ["run", "magic8ball", "--bogus"]],
+     ["run", "magic8ball", "--bogus"], ["run", "magic8ball", "--steps"], ["render"]],
 )
 def test_argparse_usage_errors_exit_2(argv, capsys):
     with pytest.raises(SystemExit) as e:
         main(argv)
     assert e.value.code == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and "error:" in err
+    out, err = capsys.readouterr()
+    # one line: the message and where the usage is
+    assert out == "" and err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith("corpuscle") and "error:" in err and "--help`)" in err
+
+
+def test_usage_error_through_the_console_script_is_one_line():
+    p = subprocess.run(["corpuscle", "run", "magic8ball", "--backend", "foo"], capture_output=True, text=True,
+                       timeout=60)
+    assert p.returncode == 2 and p.stdout == ""
+    assert p.stderr == ("corpuscle run: error: argument --backend: invalid choice: 'foo' (choose from 'auto', "
+                        "'serial', 'cpu', 'cuda') (see `corpuscle run --help`)\n")
 
 
 @pytest.mark.parametrize("name", list(COMMANDS))

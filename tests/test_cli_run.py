@@ -73,10 +73,21 @@ class FakeSim:
     def cuda_available(cls):
         return cls.cuda
 
+    def set_end_time(self, t):
+        self.end_time = t
+
     def step(self, k):
+        # the core's contract: up to k steps, none past the end time or once unsound;
+        # returns the steps taken
         self.calls.append(("step", k))
-        self.steps += k
-        self.time += k * self.dt
+        taken = 0
+        while taken < k and self.time < self.end_time - 1e-12:
+            if self.unhealthy_at is not None and self.steps >= self.unhealthy_at:
+                break
+            self.steps += 1
+            self.time = min(self.end_time, self.time + self.dt)
+            taken += 1
+        return taken
 
     def frame(self, ghosts=False, velocity=False):
         fields = {"position": "pos"}

@@ -6,12 +6,15 @@ bad options, unusable backends, unwritable files) ends with exit code 2 and one 
 ``corpuscle: error: ...`` on stderr, never a traceback. Scenes are loaded and validated
 before the compiled core is imported, so those errors need no build.
 
-Exit codes: 0 success, 2 bad input, 3 run stopped by a health check, 130 interrupted.
+Exit codes: 0 success, 2 bad input, 3 run stopped by a health check, 4 the output could not
+be written (disk full ...; the frames written so far are kept), 130 interrupted, 141 stdout
+closed (broken pipe).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as _dt
 import importlib
 import json
@@ -21,9 +24,12 @@ import pathlib
 import platform
 import re
 import shlex
+import signal
 import statistics
 import sys
+import threading
 import time
+import warnings
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -276,22 +282,32 @@ register(Command("info", "show the version, build options and usable GPUs", _con
 # ---------------------------------------------------------------------------
 
 RUN_OPTIONS = {"particles": "fluid.particles", "seed": "run.seed", "time": "run.end_time", "every": "run.record_every"}
+EXIT_WRITE = 4  # the output could not be written (disk full, file too large, I/O error)
 
 
 def _configure_run(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", metavar="SCENE|FILE.toml", help="a built-in scene name (see `corpuscle scenes`) or a scene file")
+    p.add_argument("scene", metavar="SCENE|FILE.toml", nargs="?",
+                   help="a built-in scene name (see `corpuscle scenes`) or a scene file (not with --resume)")
     p.add_argument("--backend", choices=("auto", *BACKENDS), default="auto", help="compute backend (default: auto)")
-    stop = p.add_mutually_exclusive_group()
-    stop.add_argument("--steps", metavar="N", help="stop after N steps (or at run.end_time, whichever comes first)")
-    stop.add_argument("--time", metavar="T", help="simulated end time in seconds (sets run.end_time)")
+    p.add_argument("--steps", metavar="N",
+                   help="run exactly N steps (past run.end_time unless --time is also given; then whichever "
+                        "comes first)")
+    p.add_argument("--time", metavar="T", help="simulated end time in seconds (sets run.end_time)")
     p.add_argument("--particles", metavar="N", help="number of fluid particles (sets fluid.particles)")
     p.add_argument("--seed", metavar="S", help="random seed (sets run.seed)")
     p.add_argument(
         "--set", metavar="KEY=VALUE", action="append", default=[],
         help="override any scene key, value in TOML syntax (repeatable), e.g. --set fluid.stiffness=2e4",
     )
-    p.add_argument("--out", metavar="FILE.cps", help="output frame stream (default: <scene name>.cps here)")
+    p.add_argument("--out", metavar="FILE.cps", help="output frame stream (default: <scene name>.cps here; "
+                                                     "with --resume: the resumed file itself)")
     p.add_argument("--every", metavar="K", help="record a frame every K steps (sets run.record_every)")
+    p.add_argument("--checkpoint-every", metavar="K",
+                   help="make every recorded frame at a multiple of K steps a checkpoint (the full state to "
+                        "resume from; K a multiple of the record interval), and the last frame too")
+    p.add_argument("--resume", metavar="RUN.cps",
+                   help="continue the run recorded in RUN.cps from its last checkpoint (appending to it, or "
+                        "writing --out); --time or --steps set a new end, else the original one stands")
     p.add_argument("--ghosts", action="store_true", help="also record the wall ghost particles")
     p.add_argument("--velocity", action="store_true", help="also record particle velocities")
     p.add_argument("--json", action="store_true", help="print only one JSON summary object on stdout")
@@ -301,22 +317,114 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
     render.add_live_render_arguments(p)
 
 
-def _run_prepare(args: argparse.Namespace):
+@dataclass
+class _RunPlan:
+    """What `run` will do, settled before the core is imported."""
+
+    scene: Any
+    out: pathlib.Path
+    every: int
+    end_time: float          # absolute simulated end time (inf: none)
+    end_step: int | None     # absolute step to stop at (None: none)
+    checkpoint_every: int | None
+    resume: dict[str, Any] | None = None  # path, header, checkpoint frame index, state
+
+
+def _same_file(a: pathlib.Path, b: pathlib.Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
+
+
+def _check_out(out: pathlib.Path, scene) -> None:
+    """The output folder must exist, and the output must not be a folder or the scene file."""
+    parent = out.parent if str(out.parent) else pathlib.Path(".")
+    if not parent.is_dir():
+        raise UsageError(f"--out {out}: folder {parent} does not exist")
+    if out.is_dir():
+        raise UsageError(f"--out {out}: is a folder")
+    if scene is not None and scene.path and _same_file(out, pathlib.Path(scene.path)):
+        raise UsageError(f"--out {out}: is the scene file being run; choose another output")
+
+
+def _run_prepare(args: argparse.Namespace) -> _RunPlan:
     """Parse options and load the scene: everything that can fail without the core."""
     steps = _int_option("--steps", args.steps, minimum=1)
     args.particles = _int_option("--particles", args.particles)
     args.seed = _int_option("--seed", args.seed)
     args.time = _float_option("--time", args.time)
     args.every = _int_option("--every", args.every, minimum=1)
+    ckpt = _int_option("--checkpoint-every", args.checkpoint_every, minimum=1)
+    if args.resume:
+        if args.time is not None and not args.time > 0:
+            raise UsageError(f"--time must be a positive number of seconds, got {args.time:g}")
+        return _resume_prepare(args, steps, ckpt)
+    if args.scene is None:
+        raise UsageError("run needs a SCENE or FILE.toml (or --resume RUN.cps); see `corpuscle run --help`")
     scene = load_scene(args.scene, _overrides(args, RUN_OPTIONS))
-    # the output folder must exist before any expensive work
+    every = int(scene["run.record_every"])
     out = pathlib.Path(args.out) if args.out else pathlib.Path(f"{_safe_filename(scene.name)}.cps")
-    parent = out.parent if str(out.parent) else pathlib.Path(".")
-    if not parent.is_dir():
-        raise UsageError(f"--out {out}: folder {parent} does not exist")
-    if out.is_dir():
-        raise UsageError(f"--out {out}: is a folder")
-    return scene, steps, out
+    _check_out(out, scene)
+    if ckpt is not None and ckpt % every:
+        raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval "
+                         f"(run.record_every = {every})")
+    # --steps alone runs exactly that many steps; with --time, whichever comes first
+    end_time = float(scene["run.end_time"]) if steps is None or args.time is not None else math.inf
+    return _RunPlan(scene, out, every, end_time, steps, ckpt)
+
+
+def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | None) -> _RunPlan:
+    """--resume RUN.cps: the scene, the record interval and the end come from its header."""
+    for option, given in (("SCENE", args.scene), ("--particles", args.particles), ("--seed", args.seed),
+                          ("--set", args.set), ("--every", args.every)):
+        if given:
+            raise UsageError(f"--resume continues the recorded scene; {option} cannot change it")
+    import numpy as np
+
+    from .scene import Scene
+
+    io = importlib.import_module("corpuscle.io")
+    src = pathlib.Path(args.resume)
+    if not src.is_file():
+        raise UsageError(f"--resume {src}: no such file")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a torn tail is what a killed run leaves: it is cut off
+        run = io.open(src)
+    try:
+        header = dict(run.header)
+        kinds = run.kinds
+        last = max((i for i, k in enumerate(kinds) if k == "checkpoint"), default=None)
+        if last is None:
+            raise UsageError(f"--resume {src}: the run has no checkpoint (record with --checkpoint-every K)")
+        frame = run[last]
+        state = {name: np.array(frame[name]) for name in frame.fields}
+        step0 = int(frame.step)
+    finally:
+        run.close()
+    params = header.get("parameters")
+    if not isinstance(params, dict):
+        raise UsageError(f"--resume {src}: the header has no scene parameters")
+    scene = Scene.from_dict(params, name=str(header.get("scene", "scene")))
+    every = int(header.get("record_every") or scene["run.record_every"])
+    out = pathlib.Path(args.out) if args.out else src
+    _check_out(out, None)
+    if ckpt is None:
+        ckpt = header.get("checkpoint_every")
+    if ckpt is not None and int(ckpt) % every:
+        raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval ({every})")
+    # a new end, or the recorded run's own
+    if steps is not None or args.time is not None:
+        end_time = args.time if args.time is not None else math.inf
+        end_step = step0 + steps if steps is not None else None
+    else:
+        t = header.get("end_time")
+        end_time = math.inf if t is None else float(t)
+        end_step = header.get("end_step")
+    resume = {"path": src, "header": header, "frame": last, "state": state, "step": step0}
+    return _RunPlan(scene, out, every, end_time, end_step, None if ckpt is None else int(ckpt), resume)
 
 
 class _Progress:
@@ -324,13 +432,13 @@ class _Progress:
 
     def __init__(self, enabled: bool, budget: int | None, end_time: float) -> None:
         self.bar = None
-        self.budget = budget
-        if not enabled:
+        self.budget = budget if budget is not None or not math.isfinite(end_time) else None
+        if not enabled or (self.budget is None and not math.isfinite(end_time)):
             return
         from tqdm import tqdm  # lazily: only runs with a terminal need it
 
-        if budget is not None:
-            self.bar = tqdm(total=budget, unit="step", file=sys.stderr, dynamic_ncols=True, leave=False)
+        if self.budget is not None:
+            self.bar = tqdm(total=self.budget, unit="step", file=sys.stderr, dynamic_ncols=True, leave=False)
         else:
             self.bar = tqdm(
                 total=end_time, unit="s", file=sys.stderr, dynamic_ncols=True, leave=False,
@@ -352,11 +460,12 @@ class _Progress:
             self.bar.close()
 
 
-def _run_header(scene, sim, backend: str, every: int, args: argparse.Namespace) -> dict[str, Any]:
+def _run_header(plan: _RunPlan, sim, backend: str, args: argparse.Namespace) -> dict[str, Any]:
     """The frame-stream header: the simulation's own description (scene name, container,
-    bodies, h, ...) plus what was run, how and by which build."""
+    bodies, h, ...) plus what was run, how and by which build, and where it ends."""
     from . import __version__
 
+    scene = plan.scene
     header = dict(sim.header()) if hasattr(sim, "header") else {}
     header.update({
         "program": PROG,
@@ -370,7 +479,10 @@ def _run_header(scene, sim, backend: str, every: int, args: argparse.Namespace) 
         "particles": int(sim.n_particles),
         "ghosts_recorded": bool(args.ghosts),
         "velocity_recorded": bool(args.velocity),
-        "record_every": every,
+        "record_every": plan.every,
+        "checkpoint_every": plan.checkpoint_every,
+        "end_time": plan.end_time if math.isfinite(plan.end_time) else None,
+        "end_step": plan.end_step,
         "host": platform.node(),
     })
     return header
@@ -384,76 +496,160 @@ def _live_render(args: argparse.Namespace, header: dict[str, Any]):
     return render.LiveRender.from_args(args, header)
 
 
-def _record(writer, sim, args: argparse.Namespace, live) -> None:
-    """Write one frame (and render it when `--render` asked for that)."""
+@contextlib.contextmanager
+def _interrupts_deferred():
+    """Ctrl-C while a frame is written takes effect once it is whole."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    hits: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, _frame: hits.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if hits:
+            raise KeyboardInterrupt
+
+
+def _checkpoint_record(sim, rec: dict) -> None:
+    """Add the full state (Simulation.checkpoint) to a frame's fields: velocities and ids
+    of the fluid, and every scalar as a one-element array of the group ``state``."""
+    import numpy as np
+
+    state = sim.checkpoint()
+    fields, groups = rec["fields"], rec["groups"]
+    for name in ("position", "velocity", "id"):
+        fields[name] = np.asarray(state.pop(name))
+        groups[name] = "fluid"
+    for name, value in state.items():
+        arr = np.asarray(value)
+        if arr.dtype.kind == "f" and name not in ("time", "spacing"):
+            arr = arr.astype(np.float32)  # the core's float32 values, exactly
+        elif arr.dtype.kind in "iu":
+            arr = arr.astype(np.int64)
+        fields[f"state.{name}"] = arr.reshape(1, *arr.shape)
+        groups[f"state.{name}"] = "state"
+
+
+def _record(writer, sim, args: argparse.Namespace, live, kind: str = "frame") -> None:
+    """Write one frame (a checkpoint carries the full state too), and render it when
+    `--render` asked for that."""
     rec = sim.frame(ghosts=args.ghosts or bool(getattr(args, "render_ghosts", False)), velocity=args.velocity)
-    writer.write_frame(sim.steps, sim.time, sim.dt, **rec)
+    if kind == "checkpoint":
+        _checkpoint_record(sim, rec)
+    with _interrupts_deferred():
+        writer.write_frame(sim.steps, sim.time, sim.dt, **rec, kind=kind)
     if live is not None:
         from types import SimpleNamespace
         live.add_frame(SimpleNamespace(**rec, time=sim.time, step=sim.steps))
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    # validate everything cheap first; the core is imported only after this
-    scene, budget, out = _run_prepare(args)
-    every = int(scene["run.record_every"])
-    simulation = _import_core_module("corpuscle.simulation")
-    io = importlib.import_module("corpuscle.io")
-
-    # initialisation (not timed)
-    sim = simulation.Simulation.from_scene(scene, backend=args.backend)
-    if hasattr(sim, "set_end_time"):
-        sim.set_end_time(sim.end_time)  # the core shortens the last step to land on it
-    backend = str(getattr(sim, "backend", args.backend))
-    header = _run_header(scene, sim, backend, every, args)
-    live = _live_render(args, header)
+def _open_writer(io, plan: _RunPlan, header: dict[str, Any]):
+    """A new frame stream, or (resuming in place) the recorded one cut back to its checkpoint."""
+    out = plan.out
     try:
-        writer = io.FrameWriter(out, header)
+        if plan.resume is not None and _same_file(out, plan.resume["path"]):
+            return io.FrameWriter.append(out, keep=plan.resume["frame"] + 1)
+        if plan.resume is not None:
+            header = dict(plan.resume["header"], resumed_from=str(plan.resume["path"]),
+                          resumed_at_step=plan.resume["step"], command=header["command"])
+        return io.FrameWriter(out, header)
     except OSError as exc:
         raise UsageError(f"cannot write {out}: {exc.strerror or _one_line(exc)}") from None
 
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    # validate everything cheap first; the core is imported only after this
+    plan = _run_prepare(args)
+    scene, out, every = plan.scene, plan.out, plan.every
+    simulation = _import_core_module("corpuscle.simulation")
+    io = importlib.import_module("corpuscle.io")
+
+    # initialisation (timed on its own, not part of steps/s)
+    t_init = time.perf_counter()
+    if plan.resume is None:
+        sim = simulation.Simulation.from_scene(scene, backend=args.backend)
+    else:
+        sim = simulation.Simulation(scene, backend=args.backend, checkpoint=_checkpoint_state(plan.resume["state"]))
+    sim.set_end_time(plan.end_time)  # the core shortens the last step to land on it
+    start_steps = int(sim.steps)
+    init_seconds = time.perf_counter() - t_init
+    backend = str(getattr(sim, "backend", args.backend))
+    header = _run_header(plan, sim, backend, args)
+    live = _live_render(args, header)
+    writer = _open_writer(io, plan, header)
+
     frames = 0
+    last_recorded = start_steps
     stopped: str | None = None
     interrupted = False
-    start_steps = int(sim.steps)
-    progress = _Progress(_progress_enabled(args), budget, float(sim.end_time))
-    with writer:
-        # the first frame, then the clock starts
-        _record(writer, sim, args, live)
-        frames += 1
-        t0 = time.perf_counter()
-        try:
-            # advance in chunks of K steps, recording and checking health after each
-            while sim.time < sim.end_time:
-                done = int(sim.steps) - start_steps
-                if budget is not None and done >= budget:
-                    break
-                k = every if budget is None else min(every, budget - done)
-                before = int(sim.steps)
-                sim.step(k)
-                if int(sim.steps) <= before:
-                    raise RuntimeError(f"Simulation.step({k}) did not advance (still at step {before})")
-                _record(writer, sim, args, live)
-                frames += 1
-                progress.update(int(sim.steps) - start_steps, float(sim.time), time.perf_counter() - t0)
-                message = sim.check_health()
-                if message:
-                    stopped = _one_line(message)
-                    break
-        except KeyboardInterrupt:
-            interrupted = True
-        finally:
-            wall = time.perf_counter() - t0
-            progress.close()
-            if live is not None:
-                live.close()
+    write_error: str | None = None
+    budget = None if plan.end_step is None else plan.end_step - start_steps
+    progress = _Progress(_progress_enabled(args), budget, plan.end_time)
+    ckpt = plan.checkpoint_every
+
+    def kind_at(step: int, final: bool) -> str:
+        if ckpt is None:
+            return "frame"
+        return "checkpoint" if final or step % ckpt == 0 else "frame"
+
+    t0 = time.perf_counter()
+    try:
+        with writer:
+            try:
+                if plan.resume is None:
+                    _record(writer, sim, args, live, kind_at(start_steps, False))
+                    frames += 1
+                # advance to each multiple of K steps, record, check health
+                while True:
+                    now = int(sim.steps)
+                    left = None if plan.end_step is None else plan.end_step - now
+                    if (left is not None and left <= 0) or sim.time >= plan.end_time:
+                        break
+                    k = (now // every + 1) * every - now
+                    if left is not None:
+                        k = min(k, left)
+                    taken = int(sim.step(k))
+                    progress.update(int(sim.steps) - start_steps, float(sim.time), time.perf_counter() - t0)
+                    message = sim.check_health()
+                    if message:
+                        stopped = _one_line(message)
+                        if taken > 0:
+                            _record(writer, sim, args, live)  # the state where it stopped
+                            frames += 1
+                        break
+                    if taken == 0:
+                        break  # nothing left to do (the end time was reached)
+                    now = int(sim.steps)
+                    final = ((plan.end_step is not None and now >= plan.end_step) or sim.time >= plan.end_time)
+                    _record(writer, sim, args, live, kind_at(now, final))
+                    frames += 1
+                    last_recorded = now
+            except KeyboardInterrupt:
+                interrupted = True
+                if int(sim.steps) > last_recorded:
+                    try:
+                        _record(writer, sim, args, live)  # the whole step it stopped after
+                        frames += 1
+                    except (KeyboardInterrupt, OSError):
+                        pass
+            finally:
+                wall = time.perf_counter() - t0
+                progress.close()
+                if live is not None:
+                    live.close()
+    except OSError as exc:
+        # the writer cut the file back to its last whole frame
+        write_error = f"cannot write {out}: {exc.strerror or _one_line(exc)}"
+        wall = time.perf_counter() - t0
     # the writer is closed here, so every recorded frame is readable
 
     steps = int(sim.steps) - start_steps
     if interrupted:
         _err(f"run interrupted at step {sim.steps}; {frames} frames kept in {out}")
         return EXIT_INTERRUPTED
-    result = None if stopped else dict(sim.result() or {})
+    result = None if stopped or write_error else dict(sim.result() or {})
     n = int(sim.n_particles)
     ghosts = getattr(sim, "n_ghosts", None)
     sps = steps / wall if wall > 0 else float("inf")
@@ -464,22 +660,45 @@ def _cmd_run(args: argparse.Namespace) -> int:
         "ghosts": None if ghosts is None else int(ghosts),
         "steps": steps,
         "sim_time": float(sim.time),
+        "init_time": init_seconds,
         "wall_time": wall,
         "steps_per_second": sps,
         "particle_steps_per_second": sps * n,
         "frames": frames,
         "out": str(out),
         "result": result,
-        "stopped": stopped,
+        "stopped": stopped or write_error,
     }
+    if plan.resume is not None:
+        summary["resumed_at_step"] = plan.resume["step"]
     if args.json:
         print(json.dumps(summary, default=_json_default))
     else:
         _print_run_summary(summary, scene)
+    if write_error:
+        _err(f"error: {write_error}; {frames} frames kept up to step {last_recorded}")
+        return EXIT_WRITE
     if stopped:
         _err(f"run stopped at step {sim.steps}: {stopped}")
         return EXIT_STOPPED
     return EXIT_OK
+
+
+def _checkpoint_state(fields: dict[str, Any]) -> dict[str, Any]:
+    """A checkpoint frame's fields as Simulation.restore takes them."""
+    import numpy as np
+
+    state: dict[str, Any] = {}
+    for name, arr in fields.items():
+        if name.startswith("state."):
+            value = np.asarray(arr)[0]
+            state[name[len("state."):]] = value.tolist() if value.ndim else value.item()
+        elif name in ("position", "velocity", "id"):
+            state[name] = np.asarray(arr)
+    missing = [k for k in ("position", "velocity", "id", "time", "step") if k not in state]
+    if missing:
+        raise UsageError(f"--resume: the checkpoint lacks {', '.join(missing)}")
+    return state
 
 
 def _json_default(obj: Any) -> Any:
@@ -500,9 +719,12 @@ def _print_run_summary(s: dict[str, Any], scene) -> None:
     ]
     if s["ghosts"] is not None:
         rows.append(("ghosts", f"{s['ghosts']:,}"))
+    if s.get("resumed_at_step") is not None:
+        rows.append(("resumed at step", f"{s['resumed_at_step']:,}"))
     rows += [
         ("steps", f"{s['steps']:,}"),
         ("simulated time", f"{s['sim_time']:.4g} s"),
+        ("initialisation", f"{s['init_time']:.3f} s"),
         ("wall time", f"{s['wall_time']:.3f} s"),
         ("steps/s", _fmt_rate(s["steps_per_second"])),
         ("particle-steps/s", _fmt_rate(s["particle_steps_per_second"])),
@@ -572,7 +794,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         for backend in backends:
             if bar is not None:
                 bar.set_description(backend)
+            t_init = time.perf_counter()
             sim = Simulation.from_scene(scene, backend=backend)
+            init_seconds = time.perf_counter() - t_init
             if warmup:
                 sim.step(warmup)
             times = []
@@ -590,6 +814,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "steps": steps,
                 "repeats": repeats,
                 "warmup": warmup,
+                "init_seconds": init_seconds,
                 "steps_per_second": sps,
                 "particle_steps_per_second": sps * n,
                 "seconds": times,
@@ -619,10 +844,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def _print_bench(rows: list[dict[str, Any]]) -> None:
     """The benchmark table, then the per-stage table of each backend that has one."""
     serial = next((r for r in rows if r["backend"] == "serial"), None)
-    head = f"{'backend':<8} {'particles':>10} {'steps/s':>12} {'particle-steps/s':>18}"
+    head = f"{'backend':<8} {'particles':>10} {'init s':>8} {'steps/s':>12} {'particle-steps/s':>18}"
     print(head + (f" {'speedup':>9}" if serial else ""))
     for r in rows:
-        line = (f"{r['backend']:<8} {r['particles']:>10,} {_fmt_rate(r['steps_per_second']):>12} "
+        init = r.get("init_seconds")
+        init_text = f"{init:8.3f}" if isinstance(init, (int, float)) else f"{'':>8}"
+        line = (f"{r['backend']:<8} {r['particles']:>10,} {init_text} {_fmt_rate(r['steps_per_second']):>12} "
                 f"{_fmt_rate(r['particle_steps_per_second']):>18}")
         if serial:
             line += f" {r['steps_per_second'] / serial['steps_per_second']:>8.1f}x"
@@ -659,15 +886,22 @@ _register_viz()
 # ---------------------------------------------------------------------------
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors on one line: the message and where to find the usage."""
+
+    def error(self, message: str):  # noqa: D401 - argparse's hook
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
     from . import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog=PROG, description="corpuscle: GPU particle simulator (SPH fluids, DEM, rigid bodies)"
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for cmd in COMMANDS.values():
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description or cmd.help)
         cmd.configure(p)
