@@ -60,6 +60,12 @@ CASES = [
     (["run", "magic8ball", "--steps", "ten"], "--steps must be an integer, got 'ten'"),
     (["run", "magic8ball", "--time", "-1"], "run.end_time must be a number in (0, 1e6] s, got -1.0"),
     (["run", "magic8ball", "--time", "soon"], "--time must be a number, got 'soon'"),
+    (["run"], "run needs a SCENE or FILE.toml (or --resume RUN.cps)"),
+    (["run", "magic8ball", "--checkpoint-every", "150", "--every", "100"],
+     "--checkpoint-every 150 must be a multiple of the record interval (run.record_every = 100)"),
+    (["run", "{scene}", "--out", "{scene}"], "is the scene file being run; choose another output"),
+    (["run", "--resume", "{tmp}/nothing.cps"], "--resume {tmp}/nothing.cps: no such file"),
+    (["run", "magic8ball", "--resume", "{tmp}/nothing.cps"], "--resume continues the recorded scene; SCENE cannot"),
     (["run", "magic8ball", "--seed", "-1"], "run.seed"),
     (["run", "magic8ball", "--out", "{tmp}/no/such/dir/x.cps"], "does not exist"),
     (["bench", "nosuchscene"], "unknown scene 'nosuchscene'"),
@@ -71,9 +77,16 @@ CASES = [
 ]
 
 
+def _scene_file(tmp_path):
+    p = tmp_path / "mine.toml"
+    if not p.exists():
+        p.write_text('[scene]\nkind = "magic8ball"\nname = "mine"\n', encoding="utf-8")
+    return str(p)
+
+
 def _expand(argv, tmp_path):
-    """Fill in the placeholders: {bad}, {dt} (files made here) and {tmp}."""
-    files = {"{bad}": _bad_toml, "{dt}": _dt_file}
+    """Fill in the placeholders: {bad}, {dt}, {scene} (files made here) and {tmp}."""
+    files = {"{bad}": _bad_toml, "{dt}": _dt_file, "{scene}": _scene_file}
     return [files[a](tmp_path) if a in files else a.replace("{tmp}", str(tmp_path)) for a in argv]
 
 
@@ -87,7 +100,7 @@ def test_bad_input_exits_2_with_one_line(argv, needle, tmp_path, capsys, monkeyp
     lines = err.splitlines()
     assert len(lines) == 1, err
     assert lines[0].startswith("corpuscle: error: ")
-    assert needle in lines[0], lines[0]
+    assert needle.replace("{tmp}", str(tmp_path)) in lines[0], lines[0]
     assert "Traceback" not in err
     # nothing was written
     assert not list(tmp_path.glob("*.cps"))
@@ -109,7 +122,7 @@ def test_info_without_core(capsys):
 
 @pytest.mark.parametrize(
     "argv",
-    [["run"], ["run", "magic8ball", "--backend", "gpu"], ["bench", "magic8ball", "--backend", "auto"], ["nosuchcmd"],
+    [["run", "magic8ball", "--backend", "gpu"], ["bench", "magic8ball", "--backend", "auto"], ["nosuchcmd"],
      ["run", "magic8ball", "--bogus"], ["run", "magic8ball", "--steps"], ["render"]],
 )
 def test_argparse_usage_errors_exit_2(argv, capsys):

@@ -188,9 +188,9 @@ def test_run_until_stops_at_end_time():
         st = sim.state()
         assert st["done"]
         assert abs(sim.time - T) <= 1e-10, (T, sim.time)
-        before = (sim.steps, sim.time, sim.field("position", copy=True))
-        sim.step(5)
-        assert sim.steps == before[0] and sim.time == before[1] and sim.dt == 0.0
+        before = (sim.steps, sim.time, sim.field("position", copy=True), sim.dt)
+        assert sim.step(5) == 0
+        assert sim.steps == before[0] and sim.time == before[1] and sim.dt == before[3] > 0.0
         np.testing.assert_array_equal(sim.field("position", copy=True), before[2])
 
 

@@ -364,9 +364,6 @@ class Simulation:
                 die[key] = _finite_vector(key, val, 4 if key == "orientation" else 3)
         if np.linalg.norm(die["orientation"]) < 1e-6:
             raise ValueError(f"orientation must be a non-zero quaternion, got {die['orientation']}")
-        if np.linalg.norm(die["position"]) > float(self.params["radius"]):
-            raise ValueError(f"position {die['position']} is outside the container "
-                             f"(radius {self.params['radius']} m)")
         self._sim.set_die(die)
 
     # checkpoints ----------------------------------------------------------------------
