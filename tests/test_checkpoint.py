@@ -51,8 +51,8 @@ def reference(tmp_path_factory):
 def test_checkpoint_frames_carry_the_state(reference):
     with corpuscle.open(reference) as run:
         kinds = run.kinds
-        # every third frame (steps 30, 60, 90) and the last one
-        assert [i for i, k in enumerate(kinds) if k == "checkpoint"] == [3, 6, 9, 12]
+        # frame 0, every third frame (steps 30, 60, 90) and the last one
+        assert [i for i, k in enumerate(kinds) if k == "checkpoint"] == [0, 3, 6, 9, 12]
         f = run[6]
         assert f.step == 60
         for name in ("position", "velocity", "id", "state.time", "state.step", "state.die_position",

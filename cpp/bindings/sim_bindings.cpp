@@ -1,207 +1,173 @@
-// corpuscle._core.Magic8Ball: a simulation on one backend, with zero-copy field views.
+// corpuscle._core.Simulation: one class for every scene kind on every backend. Fields,
+// scalars and controls go through the kind's tables (sim/table.h), so nothing here names a
+// kind: a field is a zero-copy view (NumPy on the CPU, DLPack on CUDA), the record's scalars
+// a dict, a checkpoint a dict of arrays and scalars.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
-#include <nanobind/stl/array.h>
 #include <nanobind/stl/pair.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <cstring>
-#include <map>
 
-#include "corpuscle/scenes/magic8ball_api.h"
+#include "corpuscle/core/error.h"
+#include "corpuscle/sim/registry.h"
 
 namespace nb = nanobind;
 using namespace cps;
-using namespace cps::m8;
 
 namespace {
 
-using Arr3 = std::array<float, 3>;
-Vec3 v3(const Arr3& a) { return Vec3{{a[0], a[1], a[2]}}; }
-Arr3 a3(const Vec3& v) { return Arr3{v[0], v[1], v[2]}; }
-
-// a float parameter that must be present in the dict
-float req(const nb::dict& p, const char* key) {
-  if (!p.contains(key)) throw nb::key_error(key);
-  return nb::cast<float>(p[key]);
-}
-Vec3 req3(const nb::dict& p, const char* key) {
-  if (!p.contains(key)) throw nb::key_error(key);
-  return v3(nb::cast<Arr3>(p[key]));
-}
-
-// build the constant Model from a flat dict of SI values (see simulation.py)
-Model build_model(const nb::dict& p) {
-  Model m{};
-  m.n_fluid = nb::cast<int>(p["n_fluid"]);
-  m.h = req(p, "h");
-  m.sph.mass = req(p, "mass");
-  m.sph.rest_density = req(p, "rest_density");
-  m.sph.stiffness = req(p, "stiffness");
-  m.sph.gamma = req(p, "gamma");
-  m.sph.viscosity = req(p, "viscosity");
-  m.sph.xsph = req(p, "xsph");
-  m.sph.density_floor = req(p, "density_floor");
-  m.kern = SphKernels<D>::make(m.h);
-  m.max_neighbors = nb::cast<int>(p["max_neighbors"]);
-  m.max_near = nb::cast<int>(p["max_near"]);
-  m.list_radius = req(p, "list_radius");
-  m.rebuild_disp2 = req(p, "rebuild_distance") * req(p, "rebuild_distance");
-  m.c0 = tait_sound_speed(m.sph);
-  m.wall = SphereWall{req(p, "radius"), req(p, "wall_restitution"), req(p, "wall_friction")};
-  m.shell_inertia = req(p, "shell_inertia");
-  m.spin_damping = req(p, "spin_damping");
-  m.gravity = req3(p, "gravity");
-  m.die.half = req3(p, "die_half");
-  m.die.mass = req(p, "die_mass");
-  m.die.inertia = req3(p, "die_inertia");
-  m.contact = ContactParams{req(p, "contact_margin"), req(p, "contact_stiffness"), req(p, "contact_drag")};
-  m.body = BodyParams{req(p, "die_linear_damping"), req(p, "die_angular_damping"),
-                      req(p, "die_restitution")};
-  m.dt = DtParams{req(p, "dt_min"), req(p, "dt_max"), req(p, "cfl_advective"), req(p, "cfl_acoustic"),
-                  req(p, "cfl_force"), req(p, "cfl_viscous")};
-  // the grid covers the sphere and the ghosts mirrored up to h beyond it
-  float ext = m.wall.radius + m.list_radius;
-  m.grid = make_grid<D>(Vec3{{-ext, -ext, -ext}}, Vec3{{ext, ext, ext}}, m.list_radius);
-  if (m.grid.bits > morton_max_bits<D>())
-    throw nb::value_error("magic8ball: the grid needs more than 1024 cells per axis (h too small for the container)");
-  nb::list shakes = nb::cast<nb::list>(p["shakes"]);
-  if (nb::len(shakes) > size_t(kMaxShakes))
-    throw nb::value_error(("magic8ball: at most " + std::to_string(kMaxShakes) + " shake windows").c_str());
-  m.n_shakes = int(nb::len(shakes));
-  for (int s = 0; s < m.n_shakes; ++s) {
-    nb::dict w = nb::cast<nb::dict>(shakes[s]);
-    m.shakes[s] = ShakeWindow{req(w, "start"), req(w, "end"), req3(w, "acceleration"), req3(w, "torque")};
+// parameters from a dict of numbers, lists of numbers and dicts (lists of dicts for tables)
+class DictParams final : public ParamSource {
+ public:
+  explicit DictParams(nb::dict d, std::string where = "") : d_(std::move(d)), where_(std::move(where)) {}
+  bool has(const std::string& key) const override { return d_.contains(key.c_str()); }
+  double number(const std::string& key) const override {
+    try {
+      return nb::cast<double>(get(key));
+    } catch (const nb::cast_error&) {
+      throw Error("parameter '" + name(key) + "' must be a number");
+    }
   }
-  return m;
+  long long integer(const std::string& key) const override {
+    try {
+      return nb::cast<long long>(get(key));
+    } catch (const nb::cast_error&) {
+      throw Error("parameter '" + name(key) + "' must be an integer");
+    }
+  }
+  std::vector<double> numbers(const std::string& key) const override {
+    try {
+      return nb::cast<std::vector<double>>(get(key));
+    } catch (const nb::cast_error&) {
+      throw Error("parameter '" + name(key) + "' must be a list of numbers");
+    }
+  }
+  std::vector<std::unique_ptr<ParamSource>> tables(const std::string& key) const override {
+    std::vector<std::unique_ptr<ParamSource>> out;
+    nb::handle v = get(key);
+    if (!nb::isinstance<nb::list>(v)) throw Error("parameter '" + name(key) + "' must be a list of tables");
+    size_t k = 0;
+    for (nb::handle item : nb::borrow<nb::list>(v)) {
+      if (!nb::isinstance<nb::dict>(item)) throw Error("parameter '" + name(key) + "' must be a list of tables");
+      out.push_back(std::make_unique<DictParams>(nb::borrow<nb::dict>(item), name(key) + "[" + std::to_string(k++) + "]."));
+    }
+    return out;
+  }
+  std::unique_ptr<ParamSource> table(const std::string& key) const override {
+    nb::handle v = get(key);
+    if (!nb::isinstance<nb::dict>(v)) throw Error("parameter '" + name(key) + "' must be a table");
+    return std::make_unique<DictParams>(nb::borrow<nb::dict>(v), name(key) + ".");
+  }
+
+ private:
+  std::string name(const std::string& key) const { return where_ + key; }
+  nb::handle get(const std::string& key) const {
+    if (!d_.contains(key.c_str())) throw Error("missing parameter '" + name(key) + "'");
+    return d_[key.c_str()];
+  }
+  nb::dict d_;
+  std::string where_;
+};
+
+using F32Array = nb::ndarray<const float, nb::c_contig, nb::device::cpu>;
+
+// initial arrays: name -> float32 array of shape (n, components) or (n,)
+class DictArrays final : public ArraySource {
+ public:
+  explicit DictArrays(nb::dict d) {
+    for (auto [k, v] : d) {
+      auto a = nb::cast<F32Array>(v);
+      ArrayView view{a.data(), a.ndim() > 0 ? (long long)a.shape(0) : 0, a.ndim() > 1 ? int(a.shape(1)) : 1};
+      arrays_.emplace_back(nb::cast<std::string>(k), view);
+      keep_.push_back(a);
+    }
+  }
+  bool has(const std::string& name) const override {
+    for (auto& [n, v] : arrays_)
+      if (n == name) return true;
+    return false;
+  }
+  ArrayView get(const std::string& name) const override {
+    for (auto& [n, v] : arrays_)
+      if (n == name) return v;
+    throw Error("no initial array '" + name + "'");
+  }
+
+ private:
+  std::vector<std::pair<std::string, ArrayView>> arrays_;
+  std::vector<F32Array> keep_;
+};
+
+nb::dlpack::dtype dl(DType t) {
+  switch (t) {
+    case DType::F32: return nb::dtype<float>();
+    case DType::F64: return nb::dtype<double>();
+    case DType::I32: return nb::dtype<int>();
+    case DType::I64: return nb::dtype<long long>();
+  }
+  return nb::dtype<float>();
 }
 
-std::vector<Vec3> to_vec3(nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> a) {
-  std::vector<Vec3> out(a.shape(0));
-  std::memcpy(out.data(), a.data(), out.size() * sizeof(Vec3));
+// one scalar of a record or control as Python values (a number, or a list of `count`)
+nb::object scalar_value(const ScalarInfo& s, const unsigned char* base) {
+  const unsigned char* p = base + s.offset;
+  auto one = [&](int k) -> nb::object {
+    switch (s.dtype) {
+      case DType::F32: { float v; std::memcpy(&v, p + 4 * k, 4); return nb::float_(double(v)); }
+      case DType::F64: { double v; std::memcpy(&v, p + 8 * k, 8); return nb::float_(v); }
+      case DType::I32: { int v; std::memcpy(&v, p + 4 * k, 4); return nb::int_(v); }
+      case DType::I64: { long long v; std::memcpy(&v, p + 8 * k, 8); return nb::int_(v); }
+    }
+    return nb::none();
+  };
+  if (s.count == 1) return one(0);
+  nb::list l;
+  for (int k = 0; k < s.count; ++k) l.append(one(k));
+  return l;
+}
+
+// Python values into a scalar's bytes (exact for float32 values given as Python floats)
+std::vector<unsigned char> scalar_bytes(const ScalarInfo& s, nb::handle v) {
+  std::vector<unsigned char> out(dtype_size(s.dtype) * size_t(s.count));
+  std::vector<double> vals;
+  try {
+    if (s.count == 1 && !nb::isinstance<nb::list>(v) && !nb::isinstance<nb::tuple>(v)) vals.push_back(nb::cast<double>(v));
+    else vals = nb::cast<std::vector<double>>(v);
+  } catch (const nb::cast_error&) {
+    throw nb::value_error((s.name + " must be " + (s.count == 1 ? "a number" : std::to_string(s.count) + " numbers")).c_str());
+  }
+  if (int(vals.size()) != s.count)
+    throw nb::value_error((s.name + " must be " + std::to_string(s.count) + " numbers").c_str());
+  for (int k = 0; k < s.count; ++k) {
+    unsigned char* p = out.data() + dtype_size(s.dtype) * k;
+    switch (s.dtype) {
+      case DType::F32: { float x = float(vals[k]); std::memcpy(p, &x, 4); break; }
+      case DType::F64: { double x = vals[k]; std::memcpy(p, &x, 8); break; }
+      case DType::I32: { int x = int(vals[k]); std::memcpy(p, &x, 4); break; }
+      case DType::I64: { long long x = (long long)vals[k]; std::memcpy(p, &x, 8); break; }
+    }
+  }
   return out;
 }
 
-RigidState die_from(const nb::dict& d) {
-  RigidState s;
-  s.x = req3(d, "position");
-  s.v = req3(d, "velocity");
-  auto q = nb::cast<std::array<float, 4>>(d["orientation"]);
-  s.q = qnormalize(Quat{q[0], q[1], q[2], q[3]});
-  // angular velocity is given in the container (world) frame
-  s.w_body = qrotate_inv(s.q, req3(d, "angular_velocity"));
-  return s;
+const FieldInfo& field_info(Sim& s, const std::string& name) {
+  for (const FieldInfo& f : s.fields())
+    if (f.name == name) return f;
+  std::string known;
+  for (const FieldInfo& f : s.fields()) known += (known.empty() ? "" : ", ") + f.name;
+  throw nb::key_error(("unknown field '" + name + "' (fields: " + known + ")").c_str());
 }
 
-nb::dict die_to(const RigidState& s) {
-  nb::dict d;
-  d["position"] = a3(s.x);
-  d["velocity"] = a3(s.v);
-  d["orientation"] = std::array<float, 4>{s.q.w, s.q.x, s.q.y, s.q.z};
-  d["angular_velocity"] = a3(qrotate(s.q, s.w_body));
-  return d;
-}
-
-const std::map<std::string, Field>& field_names() {
-  static const std::map<std::string, Field> f = {
-      {"position", Field::Position},           {"velocity", Field::Velocity},
-      {"density", Field::Density},             {"pressure", Field::Pressure},
-      {"id", Field::Id},                       {"acceleration", Field::Acceleration},
-      {"ghost_position", Field::GhostPosition}, {"ghost_velocity", Field::GhostVelocity}};
-  return f;
-}
-Field field_of(const std::string& name) {
-  auto it = field_names().find(name);
-  if (it == field_names().end()) throw nb::key_error(("unknown field '" + name + "'").c_str());
-  return it->second;
-}
-bool is_vector(Field f) { return !(f == Field::Density || f == Field::Pressure || f == Field::Id); }
-nb::dlpack::dtype dtype_of(Field f) { return f == Field::Id ? nb::dtype<int>() : nb::dtype<float>(); }
-
-struct PySim {
-  std::unique_ptr<Sim> sim;
-};
-
-using Arr4 = std::array<float, 4>;
-Arr4 a4(const Quat& q) { return Arr4{q.w, q.x, q.y, q.z}; }
-Quat q4(const Arr4& a) { return Quat{a[0], a[1], a[2], a[3]}; }
-
-template <class T>
-T item(const nb::dict& d, const char* key) {
-  if (!d.contains(key)) throw nb::value_error((std::string("checkpoint: missing '") + key + "'").c_str());
-  return nb::cast<T>(d[key]);
-}
-
-// the scalars of a checkpoint, exactly (float32 values are exact as Python floats; the
-// die's angular velocity stays in its body frame)
-nb::dict scalars_of(const Globals& g) {
-  nb::dict d;
-  d["time"] = g.time;
-  d["step"] = g.step;
-  d["dt"] = g.dt;
-  d["rebuilds"] = g.rebuilds;
-  d["die_position"] = a3(g.die.x);
-  d["die_velocity"] = a3(g.die.v);
-  d["die_orientation"] = a4(g.die.q);
-  d["die_angular_velocity_body"] = a3(g.die.w_body);
-  d["shell_orientation"] = a4(g.shell_q);
-  d["shell_angular_velocity"] = a3(g.shell_omega);
-  d["control_acceleration"] = a3(g.user_acc);
-  d["control_torque"] = a3(g.user_torque);
-  d["sums_vmax2"] = g.sums.vmax2;
-  d["sums_amax2"] = g.sums.amax2;
-  d["sums_rho_err"] = g.sums.rho_err;
-  d["sums_rho_sum"] = g.sums.rho_sum;
-  d["sums_ke"] = g.sums.ke;
-  d["sums_force"] = a3(g.sums.force);
-  d["sums_torque"] = a3(g.sums.torque);
-  d["sums_contacts"] = g.sums.contacts;
-  return d;
-}
-
-// a checkpoint's scalars over the current globals (which keep the end time)
-Globals globals_from(const nb::dict& d, Globals g) {
-  g.time = item<double>(d, "time");
-  g.step = item<long long>(d, "step");
-  g.dt = item<float>(d, "dt");
-  g.rebuilds = item<long long>(d, "rebuilds");
-  g.die.x = v3(item<Arr3>(d, "die_position"));
-  g.die.v = v3(item<Arr3>(d, "die_velocity"));
-  g.die.q = q4(item<Arr4>(d, "die_orientation"));
-  g.die.w_body = v3(item<Arr3>(d, "die_angular_velocity_body"));
-  g.shell_q = q4(item<Arr4>(d, "shell_orientation"));
-  g.shell_omega = v3(item<Arr3>(d, "shell_angular_velocity"));
-  g.user_acc = v3(item<Arr3>(d, "control_acceleration"));
-  g.user_torque = v3(item<Arr3>(d, "control_torque"));
-  g.sums.vmax2 = item<float>(d, "sums_vmax2");
-  g.sums.amax2 = item<float>(d, "sums_amax2");
-  g.sums.rho_err = item<float>(d, "sums_rho_err");
-  g.sums.rho_sum = item<float>(d, "sums_rho_sum");
-  g.sums.ke = item<float>(d, "sums_ke");
-  g.sums.force = v3(item<Arr3>(d, "sums_force"));
-  g.sums.torque = v3(item<Arr3>(d, "sums_torque"));
-  g.sums.contacts = item<int>(d, "sums_contacts");
-  g.pending = g.sums;
-  g.done = g.time >= g.end_time;
-  g.bad = 0;
-  g.bad_step = -1;
-  g.rebuild[0] = g.rebuild[1] = 0;  // the restored state's first step sorts and relists
-  return g;
-}
-
-template <class T>
-nb::ndarray<nb::numpy> host_array(const std::vector<T>& v, int ndim) {
-  auto* buf = new T[v.size() > 0 ? v.size() : 1];
-  std::memcpy(buf, v.data(), v.size() * sizeof(T));
-  nb::capsule owner(buf, [](void* p) noexcept { delete[] static_cast<T*>(p); });
-  size_t shape[2] = {v.size(), 3};
-  if constexpr (std::is_same_v<T, Vec3>)
-    return nb::ndarray<nb::numpy>(buf, 2, shape, owner, nullptr, nb::dtype<float>());
-  else
-    return nb::ndarray<nb::numpy>(buf, ndim, shape, owner, nullptr, nb::dtype<T>());
+// a host array owning its bytes
+nb::ndarray<nb::numpy> owned(std::vector<unsigned char> bytes, const FieldInfo& f, long long count) {
+  auto* buf = new std::vector<unsigned char>(std::move(bytes));
+  nb::capsule owner(buf, [](void* p) noexcept { delete static_cast<std::vector<unsigned char>*>(p); });
+  size_t shape[2] = {size_t(count), size_t(f.components)};
+  return nb::ndarray<nb::numpy>(buf->data(), f.components > 1 ? 2 : 1, shape, owner, nullptr, dl(f.dtype));
 }
 
 // Python signals (Ctrl-C) are looked at every 50 ms while stepping; a raised one stops
@@ -220,35 +186,63 @@ struct SignalCheck {
   }
 };
 
+struct PySim {
+  std::unique_ptr<Sim> sim;
+};
+
+SimRequest request(const std::string& kind, const std::string& backend, const std::string& index, int device,
+                   const ParamSource* params, const ArraySource* arrays) {
+  SimRequest r;
+  r.kind = kind;
+  r.backend = backend;
+  r.index = index;
+  r.device = device;
+  r.params = params;
+  r.arrays = arrays;
+  return r;
+}
+
 }  // namespace
 
 void bind_sim(nb::module_& m) {
-  m.def("bytes_available", [](const std::string& backend) {
-    return backend == "cuda" ? bytes_available_cuda() : bytes_available_cpu();
-  }, nb::arg("backend"), "Bytes the backend can allocate now (host MemAvailable, or the GPU's free memory).");
-  nb::class_<PySim>(m, "Magic8Ball", "A Magic 8-Ball simulation on one backend (serial, cpu or cuda).")
+  nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const cps::Error& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    }
+  });
+
+  m.def("kinds", [] {
+    nb::dict d;
+    for (const KindInfo& k : kinds()) d[k.kind.c_str()] = k.indexes;
+    return d;
+  }, "Scene kinds this core simulates -> their index plug-ins (the first is the default).");
+  m.def("bytes_needed", [](const std::string& kind, const std::string& index, nb::dict params) {
+    DictParams p(params);
+    return bytes_needed(request(kind, "cpu", index, 0, &p, nullptr));
+  }, nb::arg("kind"), nb::arg("index"), nb::arg("params"), "Bytes a simulation with these parameters allocates.");
+  m.def("bytes_available", [](const std::string& backend, int device) { return bytes_available(backend, device); },
+        nb::arg("backend"), nb::arg("device") = 0,
+        "Bytes the backend can allocate now (host MemAvailable, or the GPU's free memory).");
+
+  nb::class_<PySim>(m, "Simulation", "A simulation of any scene kind on one backend (serial, cpu or cuda).")
       .def("__init__",
-           [](PySim* self, const std::string& backend, nb::dict params,
-              nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> pos,
-              nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> vel, nb::dict die) {
-             Model model = build_model(params);
-             InitialState s;
-             s.pos = to_vec3(pos);
-             s.vel = to_vec3(vel);
-             s.die = die_from(die);
-             if (int(s.pos.size()) != model.n_fluid) throw nb::value_error("positions do not match n_fluid");
+           [](PySim* self, const std::string& kind, const std::string& backend, const std::string& index,
+              nb::dict params, nb::dict arrays, int device) {
+             DictParams p(params);
+             DictArrays a(arrays);
              new (self) PySim();
-             if (backend == "serial") self->sim = make_cpu(model, s, false);
-             else if (backend == "cpu") self->sim = make_cpu(model, s, true);
-             else if (backend == "cuda") self->sim = make_cuda(model, s);
-             else throw nb::value_error(("unknown backend '" + backend + "'").c_str());
+             self->sim = make_sim(request(kind, backend, index, device, &p, &a));
            },
-           nb::arg("backend"), nb::arg("params"), nb::arg("positions"), nb::arg("velocities"), nb::arg("die"))
+           nb::arg("kind"), nb::arg("backend"), nb::arg("index"), nb::arg("params"), nb::arg("arrays"),
+           nb::arg("device") = 0)
+      .def_prop_ro("kind", [](PySim& s) { return std::string(s.sim->kind()); })
       .def_prop_ro("backend", [](PySim& s) { return std::string(s.sim->backend()); })
+      .def_prop_ro("index", [](PySim& s) { return std::string(s.sim->index()); })
       .def_prop_ro("on_device", [](PySim& s) { return s.sim->on_device(); })
-      .def_prop_ro("n_fluid", [](PySim& s) { return s.sim->model().n_fluid; })
-      .def_prop_ro("grid_bits", [](PySim& s) { return s.sim->model().grid.bits; })
-      .def_prop_ro("sound_speed", [](PySim& s) { return s.sim->model().c0; })
+      .def_prop_ro("device", [](PySim& s) { return s.sim->device(); })
+      .def_prop_ro("n_particles", [](PySim& s) { return s.sim->particles(); })
       .def("step", [](PySim& s, long long n) {
              SignalCheck check;
              long long taken = 0;
@@ -261,104 +255,128 @@ void bind_sim(nb::module_& m) {
            }, nb::arg("n") = 1,
            "Advance up to n steps; returns the steps taken (none once the end time is reached or the "
            "run went unsound). A Python signal (Ctrl-C) stops it after a whole step and is raised.")
-      .def("checkpoint", [](PySim& s) {
-             CheckpointState c = s.sim->checkpoint();
-             nb::dict d = scalars_of(c.g);
-             d["position"] = host_array(c.pos, 2);
-             d["velocity"] = host_array(c.vel, 2);
-             d["id"] = host_array(c.id, 1);
-             return d;
-           }, "The state the next step reads (fluid arrays in their current order, scalars); the next step relists.")
-      .def("restore", [](PySim& s, nb::dict d,
-                         nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> pos,
-                         nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> vel,
-                         nb::ndarray<const int, nb::shape<-1>, nb::c_contig, nb::device::cpu> ids) {
-             CheckpointState c;
-             c.pos = to_vec3(pos);
-             c.vel = to_vec3(vel);
-             c.id.assign(ids.data(), ids.data() + ids.shape(0));
-             c.g = globals_from(d, s.sim->globals());
-             s.sim->restore(c);
-           }, nb::arg("scalars"), nb::arg("positions"), nb::arg("velocities"), nb::arg("ids"),
-           "Replace the whole state by a checkpoint's (scalars as checkpoint() returns them).")
-      .def_static("bytes_needed", [](nb::dict params) { return bytes_needed(build_model(params)); },
-                  nb::arg("params"), "Bytes a simulation with these parameters allocates.")
       .def("evaluate", [](PySim& s) { s.sim->evaluate(); },
-           "Compute densities, forces and reductions for the current state without advancing.")
-      .def("state", [](PySim& s) {
-             Globals g = s.sim->globals();
+           "Compute the pair stages and reductions for the current state without advancing.")
+      .def("set_end_time", [](PySim& s, double t) { s.sim->set_end_time(t); }, nb::arg("t"))
+      .def("scalars", [](PySim& s) {
+             const unsigned char* rec = s.sim->scene_record();
              nb::dict d;
-             d["time"] = g.time;
-             d["end_time"] = g.end_time;
-             d["step"] = g.step;
-             d["dt"] = g.dt;
-             d["n_ghost"] = g.n_ghost;
-             d["rebuilds"] = g.rebuilds;
-             d["done"] = bool(g.done);
-             d["bad"] = g.bad;
-             d["bad_step"] = g.bad_step;
-             d["die"] = die_to(g.die);
-             d["shell_orientation"] = std::array<float, 4>{g.shell_q.w, g.shell_q.x, g.shell_q.y, g.shell_q.z};
-             d["shell_angular_velocity"] = a3(g.shell_omega);
-             d["vmax"] = std::sqrt(g.sums.vmax2);
-             d["amax"] = std::sqrt(g.sums.amax2);
-             d["density_error"] = g.sums.rho_err;
-             d["mean_density"] = g.sums.rho_sum / float(s.sim->model().n_fluid);
-             d["kinetic_energy"] = g.sums.ke;
-             d["die_force"] = a3(g.sums.force);
-             d["die_torque"] = a3(g.sums.torque);
-             d["die_contacts"] = g.sums.contacts;
-             d["answer_face"] = window_face(g.die.q);
-             d["chosen_dt"] = sums_dt(s.sim->model(), g.sums, g.die);  // what a finalize would choose from these sums
+             for (const ScalarInfo& x : s.sim->scalars()) d[x.name.c_str()] = scalar_value(x, rec);
+             for (const auto& [k, v] : s.sim->derived()) d[k.c_str()] = v;
              return d;
-           }, "Scalars of the current state (time, dt, die pose, reductions of the last evaluation).")
-      .def("set_control", [](PySim& s, Arr3 acc, Arr3 torque) {
-             Globals g = s.sim->globals();
-             g.user_acc = v3(acc);
-             g.user_torque = v3(torque);
-             s.sim->set_globals(g);
-           }, nb::arg("acceleration"), nb::arg("torque"),
-           "Container acceleration (m/s^2) and shell torque (N m) added to the scene's shake schedule.")
-      .def("set_end_time", [](PySim& s, double t) {
-             Globals g = s.sim->globals();
-             g.end_time = t;
-             g.done = g.time >= t;
-             s.sim->set_globals(g);
-           })
-      .def("set_die", [](PySim& s, nb::dict die) {
-             Globals g = s.sim->globals();
-             g.die = die_from(die);
-             s.sim->set_globals(g);
-           })
-      .def("set_particles", [](PySim& s, nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> pos,
-                               nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> vel) {
-             s.sim->set_particles(to_vec3(pos), to_vec3(vel));
-           })
+           }, "The scalars of the per-scene record as of the last step, and the values the kind derives.")
+      .def("set_scalar", [](PySim& s, const std::string& name, nb::handle value) {
+             for (const ScalarInfo& x : s.sim->scalars())
+               if (x.name == name) {
+                 auto b = scalar_bytes(x, value);
+                 s.sim->set_scalar(name, b.data());
+                 return;
+               }
+             throw nb::key_error(("unknown scalar '" + name + "'").c_str());
+           }, nb::arg("name"), nb::arg("value"))
+      .def("controls", [](PySim& s) {
+             nb::dict d;
+             for (const ScalarInfo& x : s.sim->controls()) d[x.name.c_str()] = x.count;
+             return d;
+           }, "Control inputs -> number of values.")
+      .def("set_control", [](PySim& s, nb::dict values) {
+             for (auto [k, v] : values) {
+               std::string name = nb::cast<std::string>(k);
+               bool found = false;
+               for (const ScalarInfo& x : s.sim->controls())
+                 if (x.name == name) {
+                   auto b = scalar_bytes(x, v);
+                   s.sim->set_control(name, b.data());
+                   found = true;
+                 }
+               if (!found) throw nb::key_error(("unknown control '" + name + "'").c_str());
+             }
+           }, nb::arg("values"), "Set control inputs (name -> values) for the next steps; asynchronous, no rebuild.")
+      .def("fields", [](PySim& s) {
+             nb::list l;
+             for (const FieldInfo& f : s.sim->fields()) {
+               nb::dict d;
+               d["name"] = f.name;
+               d["group"] = f.group;
+               d["dtype"] = std::string(dtype_kind(f.dtype) == 'f' ? "<f" : "<i") + std::to_string(dtype_size(f.dtype));
+               d["components"] = f.components;
+               d["checkpointed"] = f.checkpointed;
+               d["settable"] = f.settable;
+               l.append(d);
+             }
+             return l;
+           }, "The kind's particle fields.")
       .def("download", [](PySim& s, const std::string& name) {
-             Field f = field_of(name);
-             auto [ptr, count] = s.sim->view(f);
+             const FieldInfo& f = field_info(*s.sim, name);
+             auto [ptr, count] = s.sim->view(name);
              (void)ptr;
-             size_t comps = is_vector(f) ? 3 : 1;
-             size_t bytes = size_t(count) * comps * 4;
-             auto* buf = new uint8_t[bytes > 0 ? bytes : 1];
-             if (count > 0) s.sim->download(f, buf);
-             nb::capsule owner(buf, [](void* p) noexcept { delete[] static_cast<uint8_t*>(p); });
-             size_t shape[2] = {size_t(count), 3};
-             return nb::ndarray<nb::numpy>(buf, is_vector(f) ? 2 : 1, shape, owner, nullptr, dtype_of(f));
+             std::vector<unsigned char> bytes(size_t(count) * size_t(f.components) * dtype_size(f.dtype));
+             if (count > 0) s.sim->download(name, bytes.data());
+             return owned(std::move(bytes), f, count);
            }, nb::arg("name"), "A host (NumPy) copy of a field.")
       .def("view", [](nb::handle self, const std::string& name) {
              PySim& s = nb::cast<PySim&>(self);
-             Field f = field_of(name);
-             auto [ptr, count] = s.sim->view(f);
-             size_t shape[2] = {size_t(count), 3};
-             int ndim = is_vector(f) ? 2 : 1;
+             const FieldInfo& f = field_info(*s.sim, name);
+             auto [ptr, count] = s.sim->view(name);
+             size_t shape[2] = {size_t(count), size_t(f.components)};
+             int ndim = f.components > 1 ? 2 : 1;
              // host memory: a NumPy array; device memory: an array exposing __dlpack__
              if (!s.sim->on_device())
-               return nb::cast(nb::ndarray<nb::numpy>(ptr, ndim, shape, self, nullptr, dtype_of(f)));
-             return nb::cast(nb::ndarray<nb::array_api>(ptr, ndim, shape, self, nullptr, dtype_of(f),
-                                                        nb::device::cuda::value, 0));
+               return nb::cast(nb::ndarray<nb::numpy>(ptr, ndim, shape, self, nullptr, dl(f.dtype)));
+             return nb::cast(nb::ndarray<nb::array_api>(ptr, ndim, shape, self, nullptr, dl(f.dtype),
+                                                        nb::device::cuda::value, s.sim->device()));
            }, nb::arg("name"),
            "A zero-copy view of a field (host memory, or device memory through DLPack); valid until the next step.")
+      .def("upload", [](PySim& s, const std::string& name, nb::ndarray<nb::ro, nb::c_contig, nb::device::cpu> a) {
+             const FieldInfo& f = field_info(*s.sim, name);
+             size_t item = size_t(f.components) * dtype_size(f.dtype);
+             if (a.nbytes() % item != 0) throw nb::value_error(("upload " + name + ": wrong item size").c_str());
+             s.sim->upload(name, a.data(), (long long)(a.nbytes() / item));
+           }, nb::arg("name"), nb::arg("values"), "Replace a field's values (host array of the field's dtype).")
+      .def("checkpoint", [](PySim& s) {
+             Snapshot snap = s.sim->checkpoint();
+             nb::dict d;
+             for (auto& [name, bytes] : snap.fields) {
+               const FieldInfo& f = field_info(*s.sim, name);
+               long long count = (long long)(bytes.size() / (size_t(f.components) * dtype_size(f.dtype)));
+               d[name.c_str()] = owned(std::move(bytes), f, count);
+             }
+             for (const ScalarInfo& x : s.sim->scalars())
+               if (x.checkpointed) d[x.name.c_str()] = scalar_value(x, snap.scene.data());
+             for (const ScalarInfo& x : s.sim->controls())
+               d[("control_" + x.name).c_str()] = scalar_value(x, snap.control.data());
+             return d;
+           }, "The state the next step reads: checkpointed fields (current order) and scalars; the next step relists.")
+      .def("restore", [](PySim& s, nb::dict d) {
+             Snapshot snap;
+             // start from the current record (keeps what a checkpoint does not hold: the end time)
+             const unsigned char* rec = s.sim->scene_record();
+             snap.scene.assign(rec, rec + s.sim->record_size());
+             for (const ScalarInfo& x : s.sim->scalars()) {
+               if (!x.checkpointed) continue;
+               if (!d.contains(x.name.c_str())) throw nb::value_error(("checkpoint: missing '" + x.name + "'").c_str());
+               auto b = scalar_bytes(x, d[x.name.c_str()]);
+               std::memcpy(snap.scene.data() + x.offset, b.data(), b.size());
+             }
+             // the control: the checkpoint's, or none
+             snap.control.assign(s.sim->control_size(), 0);
+             for (const ScalarInfo& x : s.sim->controls()) {
+               std::string key = "control_" + x.name;
+               if (!d.contains(key.c_str())) continue;
+               auto b = scalar_bytes(x, d[key.c_str()]);
+               std::memcpy(snap.control.data() + x.offset, b.data(), b.size());
+             }
+             for (const FieldInfo& f : s.sim->fields()) {
+               if (!f.checkpointed) continue;
+               if (!d.contains(f.name.c_str())) throw nb::value_error(("checkpoint: missing '" + f.name + "'").c_str());
+               auto a = nb::cast<nb::ndarray<nb::ro, nb::c_contig, nb::device::cpu>>(d[f.name.c_str()]);
+               if (a.dtype() != dl(f.dtype))
+                 throw nb::value_error(("checkpoint: '" + f.name + "' has the wrong dtype").c_str());
+               const unsigned char* p = static_cast<const unsigned char*>(a.data());
+               snap.fields.emplace_back(f.name, std::vector<unsigned char>(p, p + a.nbytes()));
+             }
+             s.sim->restore(snap);
+           }, nb::arg("state"), "Replace the whole state by a checkpoint's (as checkpoint() returns it).")
       .def("bench", [](PySim& s, long long n) {
              nb::gil_scoped_release r;
              return s.sim->bench(n);

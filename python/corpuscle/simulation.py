@@ -110,6 +110,58 @@ def _random_quaternion(rng: np.random.Generator) -> np.ndarray:
                      a * math.cos(2 * math.pi * u2), b * math.sin(2 * math.pi * u3)], dtype=np.float32)
 
 
+def _rotate_inv(q, v) -> list[float]:
+    """v rotated by the inverse of unit quaternion q (w, x, y, z): container to body frame."""
+    w, x, y, z = (float(c) for c in q)
+    r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return (r.T @ np.asarray(v, dtype=np.float64)).tolist()
+
+
+class _Magic8BallCore:
+    """The magic8ball kind over the scene-generic core class: its state as the dict the rest
+    of the package reads, its die and particle setters and its control."""
+
+    def __init__(self, core):
+        self.core = core
+
+    def __getattr__(self, name):  # step, evaluate, set_end_time, view, download, bench, profile
+        return getattr(self.core, name)
+
+    def state(self) -> dict:
+        s = self.core.scalars()
+        return {
+            "time": s["time"], "end_time": s["end_time"], "step": s["step"], "dt": s["dt"],
+            "n_ghost": s["n_ghost"], "rebuilds": s["rebuilds"], "done": bool(s["done"]), "bad": s["bad"],
+            "bad_step": s["bad_step"],
+            "die": {"position": s["die_position"], "velocity": s["die_velocity"],
+                    "orientation": s["die_orientation"],
+                    "angular_velocity": [s["die_angular_velocity_x"], s["die_angular_velocity_y"],
+                                         s["die_angular_velocity_z"]]},
+            "shell_orientation": s["shell_orientation"], "shell_angular_velocity": s["shell_angular_velocity"],
+            "vmax": s["vmax"], "amax": s["amax"], "density_error": s["sums_rho_err"],
+            "mean_density": s["mean_density"], "kinetic_energy": s["sums_ke"], "die_force": s["sums_force"],
+            "die_torque": s["sums_torque"], "die_contacts": s["sums_contacts"],
+            "answer_face": int(s["answer_face"]), "chosen_dt": s["chosen_dt"],
+        }
+
+    def set_control(self, acceleration, torque) -> None:
+        self.core.set_control({"acceleration": list(acceleration), "torque": list(torque)})
+
+    def set_die(self, die: dict) -> None:
+        q = np.asarray(die["orientation"], dtype=np.float64)
+        q = q / np.linalg.norm(q)
+        self.core.set_scalar("die_position", list(die["position"]))
+        self.core.set_scalar("die_velocity", list(die["velocity"]))
+        self.core.set_scalar("die_orientation", q.tolist())
+        self.core.set_scalar("die_angular_velocity_body", _rotate_inv(q, die["angular_velocity"]))
+
+    def set_particles(self, pos, vel) -> None:
+        self.core.upload("position", pos)  # ids restart at 0..n-1
+        self.core.upload("velocity", vel)
+
+
 class Simulation:
     """A scene running on one backend.
 
@@ -118,11 +170,17 @@ class Simulation:
     with :meth:`rigid_poses`; push shaking input with :meth:`set_control`.
     """
 
-    def __init__(self, scene, backend: str = "auto", checkpoint: dict | None = None):
+    def __init__(self, scene, backend: str = "auto", checkpoint: dict | None = None,
+                 neighbors: str | None = None, device: int = 0):
         self.scene = scene
         self.backend = resolve_backend(backend)
-        if scene.kind != "magic8ball":
+        kinds = dict(_core().kinds())
+        if scene.kind not in kinds:
             raise BackendError(f"scene kind {scene.kind!r} is not supported by this version")
+        self.neighbors = kinds[scene.kind][0] if neighbors is None else str(neighbors)
+        if self.neighbors not in kinds[scene.kind]:
+            raise ValueError(f"--neighbors must be one of {', '.join(kinds[scene.kind])}, got {self.neighbors!r}")
+        self.device = _count("device", device)
         t0 = _time.perf_counter()
         self._build_magic8ball(checkpoint)
         if checkpoint is not None:
@@ -137,12 +195,14 @@ class Simulation:
     # construction ---------------------------------------------------------------------
     @classmethod
     def from_scene(cls, scene, backend: str = "auto", overrides: dict[str, Any] | None = None,
-                   **kwargs) -> "Simulation":
+                   neighbors: str | None = None, device: int = 0, **kwargs) -> "Simulation":
         """Load a scene (built-in name, TOML path or Scene) with overrides and build it.
 
         Overrides are dotted keys (``{"fluid.stiffness": 2e4}``) or keyword arguments with
         ``__`` for the dot (``fluid__stiffness=2e4``); ``particles``, ``seed`` and
         ``end_time`` are shorthands for ``fluid.particles``, ``run.seed`` and ``run.end_time``.
+        ``neighbors`` picks the neighbour search (``lists``, ``grid``, ``allpairs``; the
+        kind's first by default), ``device`` the CUDA device.
         """
         from .scene import Scene, load_scene
 
@@ -154,7 +214,7 @@ class Simulation:
             scene = scene.with_overrides(ovr) if ovr else scene
         else:
             scene = load_scene(scene, ovr)
-        return cls(scene, backend)
+        return cls(scene, backend, neighbors=neighbors, device=device)
 
     @staticmethod
     def cuda_available() -> bool:
@@ -200,7 +260,8 @@ class Simulation:
         # neighbour lists reach h (1 + skin) and stand until a particle has moved skin h / 2
         # (less the stretch of the mirror map, under which a ghost moves up to
         # (2R - r) / r times as far as its particle at r >= R - h (1 + skin)); skin 0: every step
-        skin = float(v["sph.skin"])
+        # (grid and allpairs search every step: no skin)
+        skin = float(v["sph.skin"]) if self.neighbors == "lists" else 0.0
         list_radius = h * (1.0 + skin)
         r_min = max(radius - list_radius, 0.25 * radius)
         stretch = (2.0 * radius - r_min) / r_min
@@ -216,8 +277,8 @@ class Simulation:
         params["max_neighbors"] = capacity(list_radius)
         params["max_near"] = capacity(h)
         self.params = params
-        die = {"position": die_pos.tolist(), "velocity": [0.0] * 3, "orientation": die_q.tolist(),
-               "angular_velocity": [0.0] * 3}
+        params["die_initial"] = {"position": die_pos.tolist(), "velocity": [0.0] * 3,
+                                 "orientation": die_q.tolist(), "angular_velocity": [0.0] * 3}
         self._check_memory(params)  # before the (costly) placement and any allocation
         if checkpoint is None:
             self._check_room(radius, half, die_pos, die_q, margin, n)
@@ -234,7 +295,9 @@ class Simulation:
                                  f"fluid.particles = {n}")
         self.spacing = float(spacing)
         vel = np.zeros_like(pos)
-        self._sim = _core().Magic8Ball(self.backend, params, np.ascontiguousarray(pos), vel, die)
+        core = _core().Simulation("magic8ball", self.backend, self.neighbors, params,
+                                  {"position": np.ascontiguousarray(pos), "velocity": vel}, self.device)
+        self._sim = _Magic8BallCore(core)
         self.end_time = float(v["run.end_time"])
         self.answers = list(v["die.answers"])
 
@@ -260,8 +323,8 @@ class Simulation:
 
     def _check_memory(self, params: dict) -> None:
         """Fail before allocating when the scene needs more memory than the backend has."""
-        need = float(_core().Magic8Ball.bytes_needed(params))
-        have = float(_core().bytes_available(self.backend))
+        need = float(_core().bytes_needed("magic8ball", self.neighbors, params))
+        have = float(_core().bytes_available(self.backend, self.device))
         if have > 0 and need > have:
             v = self.scene.values
             keys = ", ".join(f"{k}={v[k]!r}".replace("True", "true").replace("False", "false")
@@ -374,7 +437,7 @@ class Simulation:
         same scene) continues bit-identically on the CPU backends: the step after a
         checkpoint sorts and relists, as the first step after a restore does. The scene
         draws no random numbers after its start, so there is no generator state to keep."""
-        c = dict(self._sim.checkpoint())
+        c = dict(self._sim.core.checkpoint())
         c["spacing"] = self.spacing
         return c
 
@@ -389,9 +452,10 @@ class Simulation:
         ids = np.ascontiguousarray(state["id"]).reshape(-1)
         if ids.shape != (n,) or ids.dtype.kind not in "iu" or np.any(np.sort(ids) != np.arange(n)):
             raise ValueError(f"checkpoint id must be a permutation of 0..{n - 1}")
-        scalars = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in state.items()
-                   if k not in CHECKPOINT_ARRAYS and k != "spacing"}
-        self._sim.restore(scalars, pos, vel, ids.astype(np.int32))
+        full = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in state.items()
+                if k not in CHECKPOINT_ARRAYS and k != "spacing"}
+        full.update(position=pos, velocity=vel, id=np.ascontiguousarray(ids, dtype=np.int32))
+        self._sim.core.restore(full)
 
     # state ----------------------------------------------------------------------------
     def state(self) -> dict:
@@ -416,7 +480,7 @@ class Simulation:
     @property
     def n_particles(self) -> int:
         """Fluid particles placed."""
-        return self._sim.n_fluid
+        return self._sim.core.n_particles
 
     @property
     def n_ghosts(self) -> int:

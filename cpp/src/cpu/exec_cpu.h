@@ -119,6 +119,8 @@ struct CpuExec {
   void to_host(void* dst, const void* src, size_t bytes) const { std::memcpy(dst, src, bytes); }
   void to_device(void* dst, const void* src, size_t bytes) const { std::memcpy(dst, src, bytes); }
   void synchronize() const {}
+  // a small upload ordered before the next launch (the CPU's is immediate)
+  void upload_async(void* dst, const void* src, size_t bytes) const { std::memcpy(dst, src, bytes); }
 
   // scalar snapshots between batches of steps: the CPU's memory is the host's, so a
   // snapshot is the buffer itself

@@ -4,6 +4,7 @@
 #include <cuda_runtime.h>
 
 #include <cub/cub.cuh>
+#include <cstring>
 #include <utility>
 #include <vector>
 
@@ -144,7 +145,8 @@ struct CudaExec {
   CudaExec(CudaExec&& o) noexcept
       : stream_(std::exchange(o.stream_, nullptr)), temp_(std::exchange(o.temp_, nullptr)),
         temp_bytes_(std::exchange(o.temp_bytes_, 0)), counter_(std::exchange(o.counter_, nullptr)),
-        poll_bytes_(std::exchange(o.poll_bytes_, 0)) {
+        poll_bytes_(std::exchange(o.poll_bytes_, 0)), stage_host_(std::exchange(o.stage_host_, nullptr)),
+        stage_event_(std::exchange(o.stage_event_, nullptr)), stage_bytes_(std::exchange(o.stage_bytes_, 0)) {
     for (int p = 0; p < 2; ++p) {
       graph_[p] = std::exchange(o.graph_[p], nullptr);
       eager_[p] = o.eager_[p];
@@ -163,6 +165,8 @@ struct CudaExec {
       if (poll_host_[k]) cudaFreeHost(poll_host_[k]);
       if (poll_event_[k]) cudaEventDestroy(poll_event_[k]);
     }
+    if (stage_host_) cudaFreeHost(stage_host_);
+    if (stage_event_) cudaEventDestroy(stage_event_);
     if (stream_) cudaStreamDestroy(stream_);
   }
 
@@ -269,6 +273,23 @@ struct CudaExec {
     CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
   }
   void synchronize() { CPS_CUDA_CHECK(cudaStreamSynchronize(stream_)); }
+
+  // a small upload ordered before the next launch, without waiting for the device: the
+  // bytes go through pinned staging (reused once its last copy has been done)
+  void upload_async(void* dst, const void* src, size_t bytes) {
+    if (bytes > stage_bytes_) {
+      synchronize();
+      if (stage_host_) CPS_CUDA_CHECK(cudaFreeHost(stage_host_));
+      CPS_CUDA_CHECK(cudaMallocHost(&stage_host_, bytes));
+      if (!stage_event_) CPS_CUDA_CHECK(cudaEventCreateWithFlags(&stage_event_, cudaEventDisableTiming));
+      stage_bytes_ = bytes;
+    } else {
+      CPS_CUDA_CHECK(cudaEventSynchronize(stage_event_));
+    }
+    std::memcpy(stage_host_, src, bytes);
+    CPS_CUDA_CHECK(cudaMemcpyAsync(dst, stage_host_, bytes, cudaMemcpyHostToDevice, stream_));
+    CPS_CUDA_CHECK(cudaEventRecord(stage_event_, stream_));
+  }
 
   // scalar snapshots between batches of steps: an asynchronous copy into pinned host
   // memory (two slots, so one is read while the other is written) and an event per slot
@@ -381,6 +402,9 @@ struct CudaExec {
   void* poll_host_[2] = {nullptr, nullptr};
   cudaEvent_t poll_event_[2] = {nullptr, nullptr};
   size_t poll_bytes_ = 0;
+  void* stage_host_ = nullptr;
+  cudaEvent_t stage_event_ = nullptr;
+  size_t stage_bytes_ = 0;
   cudaGraphExec_t graph_[2] = {nullptr, nullptr};
   int eager_[2] = {0, 0};
   bool graphs_ = true;

@@ -26,6 +26,22 @@ struct SingleLane {
     cps::for_each_neighbor(g, xi, ghosts, listing);
     return count;
   }
+  // visit every j in [begin, end) closer than sqrt(r2max) to xi (the all-pairs walk);
+  // returns how many there were
+  template <int D, class Visitor>
+  CPS_HD int for_each_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
+                               Visitor& visit) const {
+    int count = 0;
+    for (int j = begin; j < end; ++j) {
+      Vec<D> d = xi - pos[j];
+      float r2 = norm2(d);
+      if (r2 < r2max) {
+        visit(j, d, r2);
+        ++count;
+      }
+    }
+    return count;
+  }
   // visit the listed neighbours of xi
   template <int D, class Visitor>
   CPS_HD void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) const {
@@ -109,6 +125,25 @@ struct WarpLanes {
         }
         count += __popc(mask);
       }
+    }
+    return count;
+  }
+
+  // the all-pairs walk, each lane every 32nd candidate; returns the count on every lane
+  template <int D, class Visitor>
+  __device__ int for_each_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
+                                   Visitor& visit) const {
+    int count = 0;
+    for (int base = begin; base < end; base += 32) {
+      const int j = base + lane();
+      bool hit = false;
+      if (j < end) {
+        Vec<D> d = xi - pos[j];
+        float r2 = norm2(d);
+        hit = r2 < r2max;
+        if (hit) visit(j, d, r2);
+      }
+      count += __popc(__ballot_sync(0xffffffffu, hit));
     }
     return count;
   }

@@ -1,6 +1,7 @@
-// Magic 8-Ball on the CUDA backend: the shared pipeline over CudaExec, and the device list.
+// Every kind on the CUDA backend: the shared pipelines over CudaExec, and the device list.
 #include "corpuscle/core/devices.h"
-#include "corpuscle/scenes/magic8ball_sim.h"
+#include "corpuscle/scenes/magic8ball/build.h"
+#include "corpuscle/sim/registry.h"
 #include "cuda/exec_cuda.cuh"
 
 namespace cps {
@@ -29,24 +30,28 @@ std::vector<GpuInfo> cuda_device_list(std::string& error) {
   return out;
 }
 
-namespace m8 {
-
-std::unique_ptr<Sim> make_cuda(const Model& m, const InitialState& s) {
+// the device to use, checked against what this machine has
+static void use_device(int device) {
   std::string err;
-  if (cuda_device_list(err).empty()) throw Error("no usable CUDA device: " + err);
-  CPS_CUDA_CHECK(cudaSetDevice(0));
-  return std::make_unique<SimImpl<CudaExec>>(CudaExec(), m, s);
+  auto gpus = cuda_device_list(err);
+  if (gpus.empty()) throw Error("no usable CUDA device: " + err);
+  if (device < 0 || device >= int(gpus.size()))
+    throw Error("--device " + std::to_string(device) + ": this machine has " + std::to_string(gpus.size()) +
+                " CUDA device(s), numbered from 0");
+  CPS_CUDA_CHECK(cudaSetDevice(device));
 }
 
-// free memory of device 0
-double bytes_available_cuda() {
-  std::string err;
-  if (cuda_device_list(err).empty()) return 0.0;
-  CPS_CUDA_CHECK(cudaSetDevice(0));
+std::unique_ptr<Sim> make_sim_cuda(const SimRequest& r) {
+  use_device(r.device);
+  if (r.kind == "magic8ball") return m8::make(CudaExec(), r);
+  throw Error("unknown scene kind '" + r.kind + "'");
+}
+
+double bytes_available_cuda(int device) {
+  use_device(device);
   size_t free_b = 0, total_b = 0;
   CPS_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
   return double(free_b);
 }
 
-}  // namespace m8
 }  // namespace cps

@@ -1,136 +1,15 @@
-// The Magic 8-Ball (seed 001): SPH fluid in a sphere with mirrored ghosts, a rigid cube die
-// coupled two ways, shaking through the container frame, adaptive dt.
-//
-// Model (constant), Globals (per-scene mutable scalars that live with the particles, on the
-// device under CUDA) and Arrays (structure of arrays) are plain data; each stage below is a
-// functor run by a backend's parallel_for. Nothing here knows which backend runs it.
+// The Magic 8-Ball's stages: each a functor run by a backend's parallel_for over the
+// particles (or one item per scene). Nothing here knows which backend runs it.
 #pragma once
 #include "corpuscle/core/lanes.h"
-#include "corpuscle/physics/boundary.h"
-#include "corpuscle/physics/rigid.h"
-#include "corpuscle/physics/sph.h"
-#include "corpuscle/physics/timestep.h"
-#include "corpuscle/spatial/grid.h"
+#include "corpuscle/scenes/magic8ball/model.h"
 
 namespace cps::m8 {
 
-constexpr int D = 3;
-constexpr int kMaxShakes = 32;
-
-// a time window of container shaking: linear acceleration and torque on the shell
-struct ShakeWindow {
-  float start, end;
-  Vec3 acc;
-  Vec3 torque;
-};
-
-// constant per-scene parameters
-struct Model {
-  int n_fluid;           // fluid particles (ghost slots: the same number again)
-  int max_neighbors;     // neighbour list capacity per particle (within the list radius)
-  int max_near;          // capacity of the per-step list of neighbours within h
-  float list_radius;     // neighbour lists and cells: h (1 + skin)
-  float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
-  float h;               // smoothing length = cell size
-  SphParams sph;
-  SphKernels<D> kern;
-  float c0;              // sound speed
-  SphereWall wall;
-  float shell_inertia;   // kg m^2
-  float spin_damping;    // 1/s
-  Vec3 gravity;          // lab frame
-  RigidBox die;
-  ContactParams contact;
-  BodyParams body;
-  DtParams dt;
-  GridSpec<D> grid;
-  int n_shakes;
-  ShakeWindow shakes[kMaxShakes];
-};
-
-// per-step reductions over the fluid (combined with StepSums::combine, a fixed order per backend)
-struct StepSums {
-  float vmax2, amax2;    // largest squared speed / acceleration
-  float rho_err;         // largest |rho/rho0 - 1|
-  float rho_sum;         // for the mean density
-  float ke;              // kinetic energy (J)
-  Vec3 force, torque;    // reaction on the die
-  int contacts;          // particles touching the die
-
-  CPS_HD static StepSums identity() {
-    StepSums s;
-    s.vmax2 = s.amax2 = s.rho_err = s.rho_sum = s.ke = 0.0f;
-    s.force = s.torque = Vec3::zero();
-    s.contacts = 0;
-    return s;
-  }
-  CPS_HD static StepSums combine(const StepSums& a, const StepSums& b) {
-    StepSums s;
-    s.vmax2 = fmax2(a.vmax2, b.vmax2);
-    s.amax2 = fmax2(a.amax2, b.amax2);
-    s.rho_err = fmax2(a.rho_err, b.rho_err);
-    s.rho_sum = a.rho_sum + b.rho_sum;
-    s.ke = a.ke + b.ke;
-    s.force = a.force + b.force;
-    s.torque = a.torque + b.torque;
-    s.contacts = a.contacts + b.contacts;
-    return s;
-  }
-};
-struct SumsOp {
-  CPS_HD StepSums operator()(const StepSums& a, const StepSums& b) const { return StepSums::combine(a, b); }
-};
-
-// reasons a run is stopped as unstable (the first one raised is kept)
-constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
-constexpr int kBadDie = 2;        // the die's state went non-finite
-constexpr int kBadSpeed = 3;      // a speed passed 100 times the sound speed
-constexpr int kBadNeighbors = 4;  // a particle had more neighbours than its list holds
-
-// per-scene mutable scalars
-struct Globals {
-  double time;
-  double end_time;       // steps after it are no-ops (dt = 0)
-  long long step;
-  float dt;              // the dt of the last step
-  int n_ghost;
-  int done;              // end_time reached: later steps are no-ops
-  int bad;               // why the run is unsound (kBad*, the first raised), 0 while it is sound;
-                         // once raised, later steps are no-ops
-  long long bad_step;    // the step that went bad (the state is kept at bad_step - 1 when the
-                         // failure was found before integrating, at bad_step when after)
-  RigidState die;
-  Quat shell_q;          // container orientation (container -> lab)
-  Vec3 shell_omega;      // container angular velocity (container frame)
-  FrameMotion frame;     // this step's container-frame terms
-  Vec3 user_acc, user_torque;  // control set through the API, added to the schedule
-  StepSums sums;         // the reductions of the last step taken (or evaluation)
-  StepSums pending;      // this step's reductions, kept in sums once the step is taken
-  int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (raised by step s - 1)
-  long long rebuilds;    // steps that sorted and relisted
-};
-
-// structure of arrays; fluid in [0, n_fluid), ghosts after it, capacity 2 n_fluid
-struct Arrays {
-  Vec3 *pos, *vel, *pos_alt, *vel_alt;
-  float *rho, *prs;
-  int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
-  uint32_t *keys, *keys_sorted;
-  int *idx, *perm;
-  int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
-  int *ghost_slot;       // sorted fluid index -> its ghost's slot, or -1 (kept between rebuilds)
-  Vec3* x_build;         // positions at the last rebuild
-  Vec3 *acc, *xsph;
-  StepSums* items;
-  int *nbr, *nbr_count;  // neighbour lists within the list radius (max_neighbors per fluid particle)
-  int *near, *near_count;  // this step's neighbours within h (max_near per particle), for the forces
-  uint32_t *cell_start, *cell_end;
-};
-
 // the control of the container at time t: schedule plus API input
-CPS_HD CPS_INLINE void control_at(const Model& m, const Globals& g, double t, Vec3& acc, Vec3& torque) {
-  acc = g.user_acc;
-  torque = g.user_torque;
+CPS_HD CPS_INLINE void control_at(const Model& m, const Control& u, double t, Vec3& acc, Vec3& torque) {
+  acc = u.acc;
+  torque = u.torque;
   for (int s = 0; s < m.n_shakes; ++s) {
     if (t >= m.shakes[s].start && t < m.shakes[s].end) {
       acc += m.shakes[s].acc;
@@ -163,7 +42,7 @@ CPS_HD CPS_INLINE void raise_first(int* p, int code) {
 
 // a scene whose run is over (end time reached) or unsound: its steps are no-ops that only
 // carry the arrays over
-CPS_HD CPS_INLINE bool halted(const Globals* g) { return g->done != 0 || g->bad != 0; }
+CPS_HD CPS_INLINE bool halted(const Scene* g) { return g->clock.done != 0 || g->clock.bad != 0; }
 
 // cell keys of fluid particle i at x and of its ghost slot n + i, with identity values
 CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x) {
@@ -175,9 +54,9 @@ CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const 
 }
 
 // this step's container frame from the shake schedule, the API control and the shell state
-CPS_HD CPS_INLINE void prepare_frame(const Model& m, Globals& g) {
+CPS_HD CPS_INLINE void prepare_frame(const Model& m, const Control& u, Scene& g) {
   Vec3 acc, torque;
-  control_at(m, g, g.time, acc, torque);
+  control_at(m, u, g.clock.time, acc, torque);
   FrameMotion f;
   f.gravity = qrotate_inv(g.shell_q, m.gravity);
   f.acc = acc;
@@ -192,8 +71,9 @@ CPS_HD CPS_INLINE int keys_items(const Model& m) {
   return m.n_fluid > cells ? m.n_fluid : cells;
 }
 
-// the work that starts a step: clear the cell table, key every particle, set the frame
-CPS_HD CPS_INLINE void start_step(const Model& m, Globals* g, const Arrays& a, int i, const Vec3* x) {
+// the work that starts a step: clear the cell table, key every particle (the container
+// frame is set by the step's density stage, from the control as it is then)
+CPS_HD CPS_INLINE void start_step(const Model& m, const Arrays& a, int i, const Vec3* x) {
   if (uint32_t(i) < 2 * m.grid.ncells) {
     a.cell_start[i] = 0u;
     a.cell_end[i] = 0u;
@@ -202,28 +82,27 @@ CPS_HD CPS_INLINE void start_step(const Model& m, Globals* g, const Arrays& a, i
     write_keys(m, a, i, *x);
     a.ghost_of[i] = -1;
   }
-  if (i == 0) prepare_frame(m, *g);
 }
 
 // stage 1 (first step, or after the state was replaced): start a step from the current state
 struct KeysStage {
   const Model* model;
-  Globals* g;
+  Scene* g;
   Arrays a;
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
     Vec3 x = i < m.n_fluid ? a.pos[i] : Vec3::zero();
-    start_step(m, g, a, i, &x);
-    if (i == 0) g->rebuild[g->step & 1] = 1;  // a new state is always sorted and listed
+    start_step(m, a, i, &x);
+    if (i == 0) g->rebuild[g->clock.step & 1] = 1;  // a new state is always sorted and listed
   }
 };
 
 // whether this step sorts, reorders and relists (the rest of the time the order and the
 // neighbour lists of the last rebuild stand: nothing moved more than the skin allows)
-CPS_HD CPS_INLINE bool rebuilding(const Globals* g) { return g->rebuild[g->step & 1] != 0; }
+CPS_HD CPS_INLINE bool rebuilding(const Scene* g) { return g->rebuild[g->clock.step & 1] != 0; }
 
 struct RebuildFlag {
-  const Globals* g;
+  const Scene* g;
   CPS_HD bool operator()() const { return rebuilding(g); }
 };
 
@@ -231,7 +110,7 @@ struct RebuildFlag {
 // not rebuilding, carry the arrays over in their order (ghosts were moved by the integration)
 struct ReorderStage {
   const Model* model;
-  Globals* g;
+  Scene* g;
   Arrays a;
   CPS_HD void operator()(int j) const {
     const Model& m = *model;
@@ -271,6 +150,57 @@ struct NoVisit {
   CPS_HD void operator()(int, const V&, float) const {}
 };
 
+// the index plug-ins of this kind (the registry names them)
+struct ListsIndex {
+  static constexpr const char* name = "lists";
+  static constexpr bool lists = true, cells = true;
+};
+struct GridIndex {
+  static constexpr const char* name = "grid";
+  static constexpr bool lists = false, cells = true;
+};
+struct AllPairsIndex {
+  static constexpr const char* name = "allpairs";
+  static constexpr bool lists = false, cells = false;
+};
+
+// the two pair stages for each index: the density (and, for lists, the listing) and the forces
+template <class Index>
+struct PairWalk {
+  // visit the density neighbours of i (within the list radius for lists, else h); returns
+  // (count within the list radius, count within h) as lists need them
+  template <class Lanes, class V>
+  CPS_HD static void density(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
+                             const Vec3& x, const Lanes& L, V& v, int& count, int& kept) {
+    NoVisit none;
+    if constexpr (Index::lists) {
+      int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
+      if (rebuilding(g)) count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
+      else count = a.nbr_count[i];
+      int* near = a.near + size_t(i) * size_t(m.max_near);
+      kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
+                                          m.kern.h2, near, m.max_near);
+    } else if constexpr (Index::cells) {
+      kept = count = L.for_each_neighbor_listing(grid, x, true, v, nullptr, 0);
+    } else {
+      kept = count = L.for_each_in_range(grid.pos, 0, m.n_fluid + g->n_ghost, x, m.kern.h2, v);
+    }
+  }
+  template <class Lanes, class V>
+  CPS_HD static void forces(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
+                            const Vec3& x, const Lanes& L, V& fv) {
+    if constexpr (Index::lists) {
+      int count = a.near_count[i];
+      L.for_each_listed(a.near + size_t(i) * size_t(m.max_near), count < m.max_near ? count : m.max_near, grid.pos,
+                        x, fv);
+    } else if constexpr (Index::cells) {
+      L.for_each_neighbor_listing(grid, x, true, fv, nullptr, 0);
+    } else {
+      L.for_each_in_range(grid.pos, 0, m.n_fluid + g->n_ghost, x, m.kern.h2, fv);
+    }
+  }
+};
+
 // stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles,
 // copied to each particle's ghost. On rebuilds the cells are walked to list every particle
 // within the list radius; every step the list is walked for the density and its entries
@@ -278,9 +208,11 @@ struct NoVisit {
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
+template <class Index>
 struct DensityStage {
   const Model* model;
-  Globals* g;
+  Scene* g;
+  const Control* ctl;
   Arrays a;
   GridView<D> grid;
   template <class Lanes>
@@ -289,28 +221,18 @@ struct DensityStage {
     const Model& m = *model;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
     const bool rebuild = rebuilding(g);
-    int count;
-    NoVisit none;
-    if (rebuild) {
-      // walk the cells and list every particle within h (1 + skin)
-      count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
-    } else {
-      count = a.nbr_count[i];
-    }
-    // walk the list: the density, and this step's neighbours within h for the forces
-    int* near = a.near + size_t(i) * size_t(m.max_near);
-    int kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
-                                            m.kern.h2, near, m.max_near);
+    int count = 0, kept = 0;
+    PairWalk<Index>::density(m, g, a, grid, i, x, L, v, count, kept);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
-    a.near_count[i] = kept;
-    if (count > m.max_neighbors || kept > m.max_near) raise_first(&g->bad, kBadNeighbors);
-    if (rebuild) {
-      a.nbr_count[i] = count;
-      a.ghost_slot[i] = a.ghost_of[a.perm[i]];
+    if (i == 0) prepare_frame(m, *ctl, *g);  // read by the force stage and the finalize
+    if constexpr (Index::lists) {
+      a.near_count[i] = kept;
+      if (count > m.max_neighbors || kept > m.max_near) raise_first(&g->clock.bad, kBadNeighbors);
+      if (rebuild) a.nbr_count[i] = count;
     }
+    if (rebuild) a.ghost_slot[i] = a.ghost_of[a.perm[i]];
     float cut = m.kern.box_fraction(m.die.half, qrotate_inv(g->die.q, x - g->die.x));
     float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(m.sph, rho);
@@ -328,9 +250,10 @@ struct DensityStage {
 // stage 4: SPH forces (over the neighbours the density stage listed), XSPH, container-frame
 // terms and die coupling of fluid particles; the per-particle contributions to this step's
 // reductions
+template <class Index>
 struct ForceStage {
   const Model* model;
-  const Globals* g;
+  const Scene* g;
   Arrays a;
   GridView<D> grid;
   template <class Lanes>
@@ -339,9 +262,7 @@ struct ForceStage {
     const Model& m = *model;
     ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
     Vec3 x = a.pos[i];
-    int count = a.near_count[i];
-    L.for_each_listed(a.near + size_t(i) * size_t(m.max_near), count < m.max_near ? count : m.max_near, grid.pos, x,
-                      fv);
+    PairWalk<Index>::forces(m, g, a, grid, i, x, L, fv);
     fv.reduce(L);
     if (!L.leader()) return;
     Vec3 v = a.vel[i];
@@ -381,28 +302,29 @@ CPS_HD CPS_INLINE float sums_dt(const Model& m, const StepSums& s, const RigidSt
 // stage 5 (one item per scene): dt, die and container integration, clock
 struct FinalizeStage {
   const Model* model;
-  Globals* g;
+  Scene* g;
   CPS_HD void operator()(int) const {
     const Model& m = *model;
-    Globals& G = *g;
-    if (G.done || G.time >= G.end_time) {
-      G.done = 1;
-      G.dt = 0.0f;
+    Scene& G = *g;
+    Clock& C = G.clock;
+    if (C.done || C.time >= C.end_time) {
+      C.done = 1;
+      G.step_dt = 0.0f;
       return;
     }
-    if (G.bad) {
+    if (C.bad) {
       // found before integrating (this step's lists overflowed), or raised by the last
       // step's integration: the kept state is the last one integrated
-      if (G.bad_step < 0) G.bad_step = G.bad == kBadNeighbors ? G.step + 1 : G.step;
-      G.dt = 0.0f;
+      if (C.bad_step < 0) C.bad_step = C.bad == kBadNeighbors ? C.step + 1 : C.step;
+      G.step_dt = 0.0f;
       return;
     }
-    G.rebuilds += G.rebuild[G.step & 1];
-    G.rebuild[G.step & 1] = 0;  // this step's readers are done with its flag
+    G.rebuilds += G.rebuild[C.step & 1];
+    G.rebuild[C.step & 1] = 0;  // this step's readers are done with its flag
     const StepSums& S = G.pending;
     float dt = sums_dt(m, S, G.die);
-    const bool last = G.time + double(dt) >= G.end_time;
-    if (last) dt = float(G.end_time - G.time);
+    const bool last = C.time + double(dt) >= C.end_time;
+    if (last) dt = float(C.end_time - C.time);
     // faults found before integrating: the step is not taken, the state stays sound
     int fault = 0;
     if (!finite(S.vmax2) || !finite(S.amax2)) fault = kBadParticles;
@@ -417,9 +339,9 @@ struct FinalizeStage {
         fault = kBadDie;
     }
     if (fault) {
-      G.bad = fault;
-      G.bad_step = G.step + 1;
-      G.dt = 0.0f;
+      C.bad = fault;
+      C.bad_step = C.step + 1;
+      G.step_dt = 0.0f;
       return;
     }
     G.die = d;
@@ -427,10 +349,11 @@ struct FinalizeStage {
     // the container shell: angular velocity and orientation
     G.shell_omega += G.frame.alpha * dt;
     G.shell_q = qintegrate_body(G.shell_q, G.shell_omega, dt);
-    G.dt = dt;
-    G.time = last ? G.end_time : G.time + double(dt);  // land exactly on the end time
-    G.done = last ? 1 : 0;                              // and stop there: later steps are no-ops
-    G.step += 1;
+    G.step_dt = dt;
+    C.dt = dt;
+    C.time = last ? C.end_time : C.time + double(dt);  // land exactly on the end time
+    C.done = last ? 1 : 0;                              // and stop there: later steps are no-ops
+    C.step += 1;
   }
 };
 
@@ -438,20 +361,20 @@ struct FinalizeStage {
 // start the next step (its keys, cleared cell table and frame) in the same pass
 struct IntegrateStage {
   const Model* model;
-  Globals* g;
+  Scene* g;
   Arrays a;
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
     Vec3 x = Vec3::zero();
     // a step that was not taken (halted before integrating) leaves the particles as they are
-    const bool taken = g->dt > 0.0f;
+    const bool taken = g->step_dt > 0.0f;
     if (i < m.n_fluid && !taken) x = a.pos[i];
     if (i < m.n_fluid && taken) {
-      float dt = g->dt;
+      float dt = g->step_dt;
       Vec3 v = a.vel[i] + a.acc[i] * dt;
       x = a.pos[i] + (v + a.xsph[i]) * dt;
       reflect_at_wall(m.wall, x, v);
-      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&g->bad, kBadParticles);
+      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&g->clock.bad, kBadParticles);
       a.pos[i] = x;
       a.vel[i] = v;
       // the ghost follows its particle between rebuilds
@@ -460,10 +383,10 @@ struct IntegrateStage {
         a.pos[gs] = mirror_position(m.wall, x);
         a.vel[gs] = mirror_velocity(x, v);
       }
-      // moved too far for the lists: the next step rebuilds (g->step is already the next)
-      if (norm2(x - a.x_build[i]) > m.rebuild_disp2) raise_flag(&g->rebuild[g->step & 1], 1);
+      // moved too far for the lists: the next step rebuilds (the clock is already the next)
+      if (norm2(x - a.x_build[i]) > m.rebuild_disp2) raise_flag(&g->rebuild[g->clock.step & 1], 1);
     }
-    start_step(m, g, a, i, &x);
+    start_step(m, a, i, &x);
   }
 };
 

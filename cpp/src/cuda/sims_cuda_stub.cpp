@@ -1,7 +1,7 @@
-// CPU-only builds: the CUDA backend factory and device list report why there is none.
+// CPU-only builds: the CUDA factory and device list report why there is no CUDA backend.
 #include "corpuscle/core/devices.h"
 #include "corpuscle/core/error.h"
-#include "corpuscle/scenes/magic8ball_api.h"
+#include "corpuscle/sim/registry.h"
 
 namespace cps {
 
@@ -10,11 +10,10 @@ std::vector<GpuInfo> cuda_device_list(std::string& error) {
   return {};
 }
 
-namespace m8 {
-std::unique_ptr<Sim> make_cuda(const Model&, const InitialState&) {
+std::unique_ptr<Sim> make_sim_cuda(const SimRequest&) {
   throw Error("this corpuscle build has no CUDA backend (built with CORPUSCLE_CUDA=OFF or no CUDA compiler)");
 }
-double bytes_available_cuda() { return 0.0; }
-}  // namespace m8
+
+double bytes_available_cuda(int) { return 0.0; }
 
 }  // namespace cps

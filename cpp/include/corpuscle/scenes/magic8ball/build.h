@@ -1,0 +1,114 @@
+// The Magic 8-Ball built from its parameters (SI values, as python/corpuscle/kinds/
+// magic8ball.py writes them) and made on an Exec with an index plug-in.
+#pragma once
+#include <memory>
+#include <string>
+
+#include "corpuscle/core/error.h"
+#include "corpuscle/sim/params.h"
+#include "corpuscle/sim/sim_impl.h"
+#include "corpuscle/scenes/magic8ball/pipeline.h"
+
+namespace cps::m8 {
+
+inline Model build_model(const ParamSource& p) {
+  Model m{};
+  m.n_fluid = int(p.integer("n_fluid"));
+  m.h = p.f("h");
+  m.sph.mass = p.f("mass");
+  m.sph.rest_density = p.f("rest_density");
+  m.sph.stiffness = p.f("stiffness");
+  m.sph.gamma = p.f("gamma");
+  m.sph.viscosity = p.f("viscosity");
+  m.sph.xsph = p.f("xsph");
+  m.sph.density_floor = p.f("density_floor");
+  m.kern = SphKernels<D>::make(m.h);
+  m.max_neighbors = int(p.integer("max_neighbors"));
+  m.max_near = int(p.integer("max_near"));
+  m.list_radius = p.f("list_radius");
+  m.rebuild_disp2 = p.f("rebuild_distance") * p.f("rebuild_distance");
+  m.c0 = tait_sound_speed(m.sph);
+  m.wall = SphereWall{p.f("radius"), p.f("wall_restitution"), p.f("wall_friction")};
+  m.shell_inertia = p.f("shell_inertia");
+  m.spin_damping = p.f("spin_damping");
+  m.gravity = p.vec3("gravity");
+  m.die.half = p.vec3("die_half");
+  m.die.mass = p.f("die_mass");
+  m.die.inertia = p.vec3("die_inertia");
+  m.contact = ContactParams{p.f("contact_margin"), p.f("contact_stiffness"), p.f("contact_drag")};
+  m.body = BodyParams{p.f("die_linear_damping"), p.f("die_angular_damping"), p.f("die_restitution")};
+  m.dt = DtParams{p.f("dt_min"), p.f("dt_max"), p.f("cfl_advective"), p.f("cfl_acoustic"), p.f("cfl_force"),
+                  p.f("cfl_viscous")};
+  // the grid covers the sphere and the ghosts mirrored up to the list radius beyond it
+  float ext = m.wall.radius + m.list_radius;
+  m.grid = make_grid<D>(Vec3{{-ext, -ext, -ext}}, Vec3{{ext, ext, ext}}, m.list_radius);
+  if (m.grid.bits > morton_max_bits<D>())
+    throw Error("magic8ball: the grid needs more than 1024 cells per axis (h too small for the container)");
+  auto shakes = p.tables("shakes");
+  if (shakes.size() > size_t(kMaxShakes))
+    throw Error("magic8ball: at most " + std::to_string(kMaxShakes) + " shake windows");
+  m.n_shakes = int(shakes.size());
+  for (int s = 0; s < m.n_shakes; ++s) {
+    const ParamSource& w = *shakes[s];
+    m.shakes[s] = ShakeWindow{w.f("start"), w.f("end"), w.vec3("acceleration"), w.vec3("torque")};
+  }
+  return m;
+}
+
+// the die at the start: position, velocity, orientation (w, x, y, z), angular velocity in
+// the container frame
+inline RigidState initial_die(const ParamSource& p) {
+  auto d = p.table("die_initial");
+  RigidState s;
+  s.x = d->vec3("position");
+  s.v = d->vec3("velocity");
+  auto q = d->numbers("orientation");
+  if (q.size() != 4) throw Error("magic8ball: die_initial.orientation needs 4 numbers");
+  s.q = qnormalize(Quat{float(q[0]), float(q[1]), float(q[2]), float(q[3])});
+  s.w_body = qrotate_inv(s.q, d->vec3("angular_velocity"));
+  return s;
+}
+
+template <class Exec, class Index>
+std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
+  using P = Pipeline<std::decay_t<Exec>, Index>;
+  Model m = build_model(*r.params);
+  auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), m, P::initial_record(initial_die(*r.params)),
+                                                              r.device);
+  // the initial particles
+  for (const char* name : {"position", "velocity"}) {
+    if (!r.arrays || !r.arrays->has(name)) throw Error(std::string("magic8ball: no initial ") + name + " array");
+    ArrayView a = r.arrays->get(name);
+    if (a.components != 3 || a.count != m.n_fluid)
+      throw Error(std::string("magic8ball: the initial ") + name + " array must be (" + std::to_string(m.n_fluid) +
+                  ", 3)");
+    sim->upload(name, a.data, a.count);
+  }
+  return sim;
+}
+
+// the index plug-ins of this kind, the first the default
+inline const std::vector<std::string>& index_names() {
+  static const std::vector<std::string> names = {ListsIndex::name, GridIndex::name, AllPairsIndex::name};
+  return names;
+}
+
+template <class Exec>
+std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
+  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
+  if (idx == ListsIndex::name) return make_with<Exec, ListsIndex>(std::move(ex), r);
+  if (idx == GridIndex::name) return make_with<Exec, GridIndex>(std::move(ex), r);
+  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex>(std::move(ex), r);
+  throw Error("magic8ball: unknown index '" + idx + "' (indexes: lists, grid, allpairs)");
+}
+
+template <class Exec>
+double bytes(const SimRequest& r) {
+  Model m = build_model(*r.params);
+  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
+  if (idx == GridIndex::name) return Pipeline<Exec, GridIndex>::bytes_needed(m);
+  if (idx == AllPairsIndex::name) return Pipeline<Exec, AllPairsIndex>::bytes_needed(m);
+  return Pipeline<Exec, ListsIndex>::bytes_needed(m);
+}
+
+}  // namespace cps::m8

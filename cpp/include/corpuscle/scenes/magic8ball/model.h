@@ -1,0 +1,132 @@
+// The Magic 8-Ball (seed 001): SPH fluid in a sphere with mirrored ghosts, a rigid cube die
+// coupled two ways, shaking through the container frame, adaptive dt.
+//
+// Model (constant), Scene (the per-scene record: clock, state, diagnostics, scratch),
+// Control (the input of the next step, in its own buffer) and Arrays (structure of arrays)
+// are plain data; nothing here knows which backend runs it.
+#pragma once
+#include "corpuscle/physics/boundary.h"
+#include "corpuscle/physics/rigid.h"
+#include "corpuscle/physics/sph.h"
+#include "corpuscle/physics/timestep.h"
+#include "corpuscle/sim/table.h"
+#include "corpuscle/spatial/grid.h"
+
+namespace cps::m8 {
+
+constexpr int D = 3;
+constexpr int kMaxShakes = 32;
+
+// a time window of container shaking: linear acceleration and torque on the shell
+struct ShakeWindow {
+  float start, end;
+  Vec3 acc;
+  Vec3 torque;
+};
+
+// constant per-scene parameters
+struct Model {
+  int n_fluid;           // fluid particles (ghost slots: the same number again)
+  int max_neighbors;     // neighbour list capacity per particle (within the list radius)
+  int max_near;          // capacity of the per-step list of neighbours within h
+  float list_radius;     // neighbour lists and cells: h (1 + skin)
+  float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
+  float h;               // smoothing length
+  SphParams sph;
+  SphKernels<D> kern;
+  float c0;              // sound speed
+  SphereWall wall;
+  float shell_inertia;   // kg m^2
+  float spin_damping;    // 1/s
+  Vec3 gravity;          // lab frame
+  RigidBox die;
+  ContactParams contact;
+  BodyParams body;
+  DtParams dt;
+  GridSpec<D> grid;
+  int n_shakes;
+  ShakeWindow shakes[kMaxShakes];
+};
+
+// per-step reductions over the fluid (combined with StepSums::combine, a fixed order per backend)
+struct StepSums {
+  float vmax2, amax2;    // largest squared speed / acceleration
+  float rho_err;         // largest |rho/rho0 - 1|
+  float rho_sum;         // for the mean density
+  float ke;              // kinetic energy (J)
+  Vec3 force, torque;    // reaction on the die
+  int contacts;          // particles touching the die
+
+  CPS_HD static StepSums identity() {
+    StepSums s;
+    s.vmax2 = s.amax2 = s.rho_err = s.rho_sum = s.ke = 0.0f;
+    s.force = s.torque = Vec3::zero();
+    s.contacts = 0;
+    return s;
+  }
+  CPS_HD static StepSums combine(const StepSums& a, const StepSums& b) {
+    StepSums s;
+    s.vmax2 = fmax2(a.vmax2, b.vmax2);
+    s.amax2 = fmax2(a.amax2, b.amax2);
+    s.rho_err = fmax2(a.rho_err, b.rho_err);
+    s.rho_sum = a.rho_sum + b.rho_sum;
+    s.ke = a.ke + b.ke;
+    s.force = a.force + b.force;
+    s.torque = a.torque + b.torque;
+    s.contacts = a.contacts + b.contacts;
+    return s;
+  }
+};
+struct SumsOp {
+  CPS_HD StepSums operator()(const StepSums& a, const StepSums& b) const { return StepSums::combine(a, b); }
+};
+
+// reasons a run is stopped as unstable (Clock::bad; the first one raised is kept)
+constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
+constexpr int kBadDie = 2;        // the die's state went non-finite
+constexpr int kBadSpeed = 3;      // a speed passed 100 times the sound speed
+constexpr int kBadNeighbors = 4;  // a particle had more neighbours than its list holds
+
+// the input of the next step, added to the shake schedule: written from the host into its
+// own buffer, read by the step's first stage; changing it rebuilds nothing
+struct Control {
+  Vec3 acc;     // container linear acceleration (m/s^2)
+  Vec3 torque;  // torque on the shell (N m)
+};
+
+// the per-scene record: one copy brings all of it to the host
+struct Scene {
+  Clock clock;
+  // state the next step reads (checkpointed)
+  RigidState die;
+  Quat shell_q;          // container orientation (container -> lab)
+  Vec3 shell_omega;      // container angular velocity (container frame)
+  long long rebuilds;    // steps that sorted and relisted
+  // diagnostics: the reductions of the last step taken (or evaluation)
+  StepSums sums;
+  // scratch of the step in flight
+  FrameMotion frame;     // this step's container-frame terms
+  StepSums pending;      // this step's reductions, kept in sums once the step is taken
+  float step_dt;         // the dt this step integrates with (0: the step is not taken)
+  int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (raised by step s - 1)
+  int n_ghost;           // ghost particles of the last rebuild
+};
+
+// structure of arrays; fluid in [0, n_fluid), ghosts after it, capacity 2 n_fluid
+struct Arrays {
+  Vec3 *pos, *vel, *pos_alt, *vel_alt;
+  float *rho, *prs;
+  int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
+  uint32_t *keys, *keys_sorted;
+  int *idx, *perm;
+  int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
+  int *ghost_slot;       // sorted fluid index -> its ghost's slot, or -1 (kept between rebuilds)
+  Vec3* x_build;         // positions at the last rebuild
+  Vec3 *acc, *xsph;
+  StepSums* items;
+  int *nbr, *nbr_count;  // neighbour lists within the list radius (max_neighbors per fluid particle)
+  int *near, *near_count;  // this step's neighbours within h (max_near per particle), for the forces
+  uint32_t *cell_start, *cell_end;
+};
+
+}  // namespace cps::m8

@@ -1,0 +1,284 @@
+// The Magic 8-Ball pipeline: its buffers (declared by the field table and the lists below),
+// the order of its stages for one step, and the views the engine hands out. SimImpl
+// (sim/sim_impl.h) owns the Exec, the per-scene record and the control, and runs it.
+//
+// Index plug-ins (`--neighbors`): Lists (cells walked on rebuilds only, neighbour lists with a
+// skin reused in between), Grid (the cells walked every step by both pair stages) and
+// AllPairs (every fluid particle and ghost visited: O(N^2), a reference). All three visit the
+// same neighbours within h, so they give the same physics to float rounding.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "corpuscle/core/error.h"
+#include "corpuscle/scenes/magic8ball/stages.h"
+#include "corpuscle/scenes/magic8ball/tables.h"
+
+namespace cps::m8 {
+
+template <class Exec, class Index>
+class Pipeline {
+ public:
+  template <class T> using Buf = typename Exec::template Buffer<T>;
+  using SceneRecord = Scene;
+  using ControlRecord = Control;
+  static constexpr const char* kind = "magic8ball";
+  static constexpr const char* index_name = Index::name;
+  static constexpr int kNumStages = 4;
+  static const char* stage_name(int s) {
+    static const char* const names[] = {"sort+reorder", "density", "forces+reduce+finalize", "integrate+keys"};
+    return names[s];
+  }
+
+  // element counts of the buffers, for the allocation and the estimate before it
+  static size_t list_slots(const Model& m) { return Index::lists ? size_t(m.n_fluid) * size_t(m.max_neighbors) : 0; }
+  static size_t near_slots(const Model& m) { return Index::lists ? size_t(m.n_fluid) * size_t(m.max_near) : 0; }
+  static double bytes_needed(const Model& m) {
+    const double n = m.n_fluid, cap = 2.0 * n;
+    const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + 2 * sizeof(uint32_t) +
+                            2 * sizeof(int);
+    const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int);
+    const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
+    const double cells = 2.0 * 2.0 * double(m.grid.ncells) * sizeof(uint32_t);
+    const double sort_scratch = cap * (sizeof(uint32_t) + sizeof(int)) * 2.0;
+    return cap * per_slot + n * per_fluid + lists + cells + sort_scratch;
+  }
+
+  static std::vector<FieldInfo> field_table() {
+    std::vector<FieldInfo> t;
+#define CPS_FIELD_INFO(name, T, comps, group, ckpt, settable, storage, count) \
+  t.push_back(FieldInfo{#name, group, dtype_of<T>(), comps, ckpt, settable});
+    CPS_M8_FIELDS(CPS_FIELD_INFO)
+#undef CPS_FIELD_INFO
+    return t;
+  }
+  static std::vector<ScalarInfo> scalar_table() {
+    std::vector<ScalarInfo> t;
+    Scene s{};
+    const char* base = reinterpret_cast<const char*>(&s);
+#define CPS_SCALAR_INFO(name, T, count, member, ckpt) \
+  t.push_back(ScalarInfo{#name, dtype_of<T>(), count, size_t(reinterpret_cast<const char*>(&s.member) - base), ckpt});
+    CPS_M8_SCALARS(CPS_SCALAR_INFO)
+#undef CPS_SCALAR_INFO
+    return t;
+  }
+  static std::vector<ScalarInfo> control_table() {
+    std::vector<ScalarInfo> t;
+    Control u{};
+    const char* base = reinterpret_cast<const char*>(&u);
+#define CPS_CONTROL_INFO(name, T, count, member) \
+  t.push_back(ScalarInfo{#name, dtype_of<T>(), count, size_t(reinterpret_cast<const char*>(&u.member) - base), false});
+    CPS_M8_CONTROLS(CPS_CONTROL_INFO)
+#undef CPS_CONTROL_INFO
+    return t;
+  }
+
+  Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u) : ex_(ex), m_(m), g_(g), u_(u) {
+    const int n = m.n_fluid, cap = 2 * n;
+    if (n <= 0) throw Error("magic8ball: no fluid particles");
+    model_.resize(1);
+    ex_.to_device(model_.data(), &m_, sizeof(Model));
+    for (int p = 0; p < 2; ++p) {
+      pos_[p].resize(cap);
+      vel_[p].resize(cap);
+      id_[p].resize(cap);
+    }
+    rho_.resize(cap);
+    prs_.resize(cap);
+    keys_.resize(cap);
+    keys_sorted_.resize(cap);
+    idx_.resize(cap);
+    perm_.resize(cap);
+    ghost_of_.resize(n);
+    ghost_slot_.resize(n);
+    x_build_.resize(n);
+    acc_.resize(n);
+    xsph_.resize(n);
+    items_.resize(n);
+    nbr_.resize(list_slots(m));
+    nbr_count_.resize(n);
+    near_.resize(near_slots(m));
+    near_count_.resize(n);
+    cells_start_.resize(2 * size_t(m.grid.ncells));
+    cells_end_.resize(2 * size_t(m.grid.ncells));
+  }
+
+  // the record of a new scene: the clock at zero, the die as given, the shell at rest
+  static Scene initial_record(const RigidState& die) {
+    Scene s{};
+    s.clock.time = 0.0;
+    s.clock.end_time = 1e300;
+    s.clock.step = 0;
+    s.clock.dt = 0.0f;
+    s.clock.bad_step = -1;
+    s.die = die;
+    s.shell_q = Quat::identity();
+    s.shell_omega = Vec3::zero();
+    s.sums = s.pending = StepSums::identity();
+    return s;
+  }
+
+  // a restored record: its scratch starts clean (the first step sorts and relists)
+  static void restored(Scene& r) {
+    r.rebuild[0] = r.rebuild[1] = 0;
+    r.pending = r.sums;
+    r.step_dt = 0.0f;
+  }
+
+  long long particles() const { return m_.n_fluid; }
+  const Model& model() const { return m_; }
+  int graph_slot() const { return parity_; }
+
+  // key the current state when no integration did (first step, replaced state, evaluate)
+  void prepare() {
+    if (keys_ready_) return;
+    ex_.for_each(keys_items(m_), KeysStage{model_.data(), g_, arrays(parity_, parity_ ^ 1)});
+    keys_ready_ = true;
+  }
+  // the buffers now hold the state the step wrote
+  void advance(bool integrated) {
+    parity_ ^= 1;
+    sorted_ = true;
+    if (!integrated) keys_ready_ = false;
+  }
+  // a new state (fields or scalars replaced, or a checkpoint): the next step sorts and relists
+  void invalidate(bool order_changed) {
+    keys_ready_ = false;
+    if (order_changed) sorted_ = false;
+  }
+
+  // the step pipeline; parity_ selects the current buffers, the reorder writes the others
+  void enqueue(bool integrate) {
+    const Model& m = m_;
+    const int n = m.n_fluid, cap = 2 * n;
+    const int cur = parity_, nxt = parity_ ^ 1;
+    Model* md = model_.data();
+    Scene* g = g_;
+    Arrays a = arrays(cur, nxt);
+    // 1. keys come from the last step's integration (or prepare)
+    // 2. sort by key (when rebuilding), then reorder into the other buffers (ghosts built
+    //    there, cell ranges) or carry the arrays over
+    ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{g},
+                  ReorderStage{md, g, a});
+    ex_.mark(0);
+    // from here on the sorted arrays are current
+    Arrays s = arrays(nxt, cur);
+    GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
+    // 3. density and pressure (and the neighbour lists); the container frame of this step
+    ex_.for_each_lanes(n, DensityStage<Index>{md, g, u_, s, grid});
+    ex_.mark(1);
+    // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
+    if (integrate) {
+      ex_.for_each_lanes_reduce_then(n, ForceStage<Index>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
+                                     StepSums::identity(), FinalizeStage{md, g});
+      ex_.mark(2);
+      // 5. integrate, then key the next step
+      ex_.for_each(keys_items(m), IntegrateStage{md, g, s});
+      ex_.mark(3);
+    } else {
+      ex_.for_each_lanes(n, ForceStage<Index>{md, g, s, grid});
+      ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+      ex_.mark(2);
+    }
+  }
+
+  // the current storage of a field (before the first step: input order, current buffers)
+  std::pair<void*, long long> view(const std::string& name, const Scene& rec) {
+    const int n = m_.n_fluid;
+    const int cur = parity_;
+    const int n_ghost = sorted_ ? rec.n_ghost : 0;
+    (void)n_ghost;
+#define CPS_FIELD_VIEW(fname, T, comps, group, ckpt, settable, storage, count) \
+  if (name == #fname) return {static_cast<void*>(storage), (long long)(count)};
+    CPS_M8_FIELDS(CPS_FIELD_VIEW)
+#undef CPS_FIELD_VIEW
+    throw Error("magic8ball: no field '" + name + "'");
+  }
+
+  // replace the fluid's positions or velocities (ids restart at 0..n-1 with positions), or
+  // restore a checkpoint's ids; the next step sorts and relists
+  void upload(const std::string& name, const void* src, long long count) {
+    const int n = m_.n_fluid;
+    if (count != n) throw Error("magic8ball: " + name + " needs " + std::to_string(n) + " items");
+    const int cur = parity_;
+    if (name == "position") {
+      ex_.to_device(pos_[cur].data(), src, n * sizeof(Vec3));
+      std::vector<int> ids(n);
+      for (int i = 0; i < n; ++i) ids[i] = i;
+      ex_.to_device(id_[cur].data(), ids.data(), n * sizeof(int));
+    } else if (name == "velocity") {
+      ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec3));
+    } else if (name == "id") {
+      ex_.to_device(id_[cur].data(), src, n * sizeof(int));
+    } else {
+      throw Error("magic8ball: field '" + name + "' cannot be set");
+    }
+    invalidate(true);
+  }
+
+  // named values derived from the record
+  std::vector<std::pair<std::string, double>> derived(const Scene& r) const {
+    Vec3 w = qrotate(r.die.q, r.die.w_body);  // the die's angular velocity in the container frame
+    return {{"answer_face", double(window_face(r.die.q))},
+            {"chosen_dt", double(sums_dt(m_, r.sums, r.die))},  // what a step would choose from these sums
+            {"vmax", std::sqrt(double(r.sums.vmax2))},
+            {"amax", std::sqrt(double(r.sums.amax2))},
+            {"mean_density", double(r.sums.rho_sum) / double(m_.n_fluid)},
+            {"die_angular_velocity_x", double(w[0])},
+            {"die_angular_velocity_y", double(w[1])},
+            {"die_angular_velocity_z", double(w[2])}};
+  }
+
+ private:
+  Arrays arrays(int cur, int nxt) {
+    Arrays a;
+    a.pos = pos_[cur].data();
+    a.vel = vel_[cur].data();
+    a.pos_alt = pos_[nxt].data();
+    a.vel_alt = vel_[nxt].data();
+    a.id = id_[cur].data();
+    a.id_alt = id_[nxt].data();
+    a.rho = rho_.data();
+    a.prs = prs_.data();
+    a.keys = keys_.data();
+    a.keys_sorted = keys_sorted_.data();
+    a.idx = idx_.data();
+    a.perm = perm_.data();
+    a.ghost_of = ghost_of_.data();
+    a.ghost_slot = ghost_slot_.data();
+    a.x_build = x_build_.data();
+    a.acc = acc_.data();
+    a.xsph = xsph_.data();
+    a.items = items_.data();
+    a.nbr = nbr_.data();
+    a.nbr_count = nbr_count_.data();
+    a.near = near_.data();
+    a.near_count = near_count_.data();
+    a.cell_start = cells_start_.data();
+    a.cell_end = cells_end_.data();
+    return a;
+  }
+
+  Exec& ex_;
+  Model m_;
+  Scene* g_;
+  const Control* u_;
+  Buf<Model> model_;
+  Buf<Vec3> pos_[2], vel_[2];
+  Buf<int> id_[2];
+  Buf<float> rho_, prs_;
+  Buf<uint32_t> keys_, keys_sorted_;
+  Buf<int> idx_, perm_, ghost_of_, ghost_slot_;
+  Buf<Vec3> x_build_;
+  Buf<Vec3> acc_, xsph_;
+  Buf<StepSums> items_;
+  Buf<int> nbr_, nbr_count_, near_, near_count_;
+  Buf<uint32_t> cells_start_, cells_end_;
+  int parity_ = 0;
+  bool sorted_ = false;
+  bool keys_ready_ = false;  // the last step's integration keyed the current state
+};
+
+}  // namespace cps::m8

@@ -1,0 +1,77 @@
+// The one interface the bindings see, for every scene kind: step, end time, control,
+// scalars, fields, checkpoints, bench, profile. No scene name appears here; a kind
+// describes its fields, scalars and control in tables (sim/table.h) and the bindings
+// convert through them.
+#pragma once
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "corpuscle/sim/table.h"
+
+namespace cps {
+
+// polled between batches of steps; true stops stepping (after a whole step)
+using StopCheck = std::function<bool()>;
+
+// a host copy of a simulation's whole state: the checkpointed fields (name -> bytes, in the
+// current particle order) and the checkpointed scalars (the per-scene record's bytes)
+struct Snapshot {
+  std::vector<std::pair<std::string, std::vector<unsigned char>>> fields;
+  std::vector<unsigned char> scene;    // the per-scene record (sim/table.h's Clock first)
+  std::vector<unsigned char> control;  // the control the next step reads
+};
+
+class Sim {
+ public:
+  virtual ~Sim() = default;
+  virtual const char* kind() const = 0;
+  virtual const char* backend() const = 0;
+  virtual const char* index() const = 0;
+  virtual bool on_device() const = 0;
+  virtual int device() const = 0;
+  virtual long long particles() const = 0;
+
+  // the kind's tables
+  virtual const std::vector<FieldInfo>& fields() const = 0;
+  virtual const std::vector<ScalarInfo>& scalars() const = 0;
+  virtual const std::vector<ScalarInfo>& controls() const = 0;
+
+  // advance up to n steps; returns how many were taken (none once the end time is reached
+  // or the run went unsound; stop() can end it early)
+  virtual long long step(long long n, const StopCheck& stop) = 0;
+  // densities, forces and reductions of the current state, without advancing
+  virtual void evaluate() = 0;
+  virtual void set_end_time(double t) = 0;
+
+  // the per-scene record (Clock first, then the kind's scalars) as of the last step: one
+  // copy per call on a device, cached until something changes it
+  virtual const unsigned char* scene_record() = 0;
+  virtual size_t record_size() const = 0;
+  virtual size_t control_size() const = 0;
+  // replace scalars of the record (name -> bytes as the table describes them)
+  virtual void set_scalar(const std::string& name, const void* bytes) = 0;
+  // the control read by the next step: own buffer, written asynchronously, no rebuild
+  virtual void set_control(const std::string& name, const void* bytes) = 0;
+  // named values the kind derives from its record (the 8-ball's answer face, ...)
+  virtual std::vector<std::pair<std::string, double>> derived() = 0;
+
+  // current storage of a field (host or device) and its item count / a host copy
+  virtual std::pair<void*, long long> view(const std::string& name) = 0;
+  virtual void download(const std::string& name, void* dst) = 0;
+  // replace a field's values (the kind decides which fields may be set and what follows)
+  virtual void upload(const std::string& name, const void* src, long long count) = 0;
+
+  // the state the next step reads / replace it (the step after either sorts and relists,
+  // so a run that checkpoints and the run resumed from it take identical steps)
+  virtual Snapshot checkpoint() = 0;
+  virtual void restore(const Snapshot& s) = 0;
+
+  // seconds for n steps on the backend's clock after a synchronise; per-stage ms per step
+  virtual double bench(long long n) = 0;
+  virtual std::vector<std::pair<std::string, double>> profile(long long n) = 0;
+};
+
+}  // namespace cps
