@@ -280,7 +280,7 @@ def test_cuda_evaluate_matches_cpu():
     assert sg["vmax"] == pytest.approx(sc["vmax"], rel=1e-6)
     assert sg["kinetic_energy"] == pytest.approx(sc["kinetic_energy"], rel=1e-5)
     assert sg["amax"] == pytest.approx(sc["amax"], rel=1e-3)
-    rho_max = by_id(cpu, "density").max() / cpu.params["rest_density"]
+    rho_max = float(by_id(cpu, "density").max()) / cpu.params["rest_density"]
     assert sg["density_error"] == pytest.approx(sc["density_error"], abs=1e-4 * rho_max)
     # ghosts: the mirror images of the same particles (every particle within the list radius
     # of the wall), from the same float32 positions: the formula's few roundings (~1e-7 m at

@@ -102,12 +102,14 @@ def test_window_acts_exactly_like_a_control_switched_on_and_off(window_runs):
 
 def test_the_window_does_shake(window_runs):
     # ... and the window really acts: after it the fluid, the die and the shell differ from
-    # the unshaken run (the fluid's centre of mass moves against the 4 m/s^2 push along +x:
-    # in the container frame the effective gravity gains -4 m/s^2 along x for 0.125 s)
+    # the unshaken run. The fluid's centre of mass moves against the 4 m/s^2 push along +x: in
+    # the container frame the effective gravity tilts by atan(4 / 9.81) = 22 degrees for
+    # 0.125 s, and the fluid's settling (its centre of mass drops ~1.5 cm at this resolution)
+    # follows it, ~0.4 x 1.5 cm toward -x; measured -7.5 mm at T_END, bound -2 mm
     sched, still = window_runs["schedule"], window_runs["still"]
     xs = sched["snaps"][2][0]["position"].astype(np.float64).mean(axis=0)
     xu = still["snaps"][2][0]["position"].astype(np.float64).mean(axis=0)
-    assert xs[0] - xu[0] < -1e-4, (xs, xu)
+    assert xs[0] - xu[0] < -2e-3, (xs, xu)
     assert np.linalg.norm(sched["snaps"][2][1]["shell_angular_velocity"]) > 0.1
     assert still["snaps"][2][1]["shell_angular_velocity"] == [0.0, 0.0, 0.0]
 
