@@ -24,8 +24,41 @@ def by_id(sim, name):
 
 def test_skin_zero_rebuilds_every_step_and_a_skin_reuses():
     assert run(0.0, 30).state()["rebuilds"] == 30
+    # with a skin the lists are reused, but rebuilt again as particles move (the first step
+    # always builds them: a trigger that never fired would leave 1)
     reused = run(0.2, 30).state()["rebuilds"]
-    assert 1 <= reused < 30
+    assert 2 <= reused < 30
+
+
+def test_rebuild_fires_exactly_when_a_particle_has_moved_the_rebuild_distance():
+    # the trigger: a step sorts and relists when, after the step before it, some particle is
+    # further than params["rebuild_distance"] from where it was at the last rebuild. Tracked
+    # here by particle id over 40 steps of the settling fluid (which moves fastest at first),
+    # and compared with the core's rebuild count step by step (cases within float32 rounding
+    # of the threshold are not judged).
+    sim = Simulation.from_scene("magic8ball", backend="cpu", particles=1000, seed=3,
+                                overrides={"sph.skin": 0.2, "shake": []})
+    d2 = float(np.float32(sim.params["rebuild_distance"])) ** 2
+    x_build = by_id(sim, "position").astype(np.float64)
+    sim.step(1)
+    assert sim.state()["rebuilds"] == 1  # the first step always builds the lists
+    fired = reused = 0
+    for step in range(2, 42):
+        x = by_id(sim, "position").astype(np.float64)  # where this step starts
+        moved2 = ((x - x_build) ** 2).sum(axis=1).max()
+        before = sim.state()["rebuilds"]
+        sim.step(1)
+        rebuilt = sim.state()["rebuilds"] - before
+        assert rebuilt in (0, 1)
+        if abs(moved2 - d2) > 1e-5 * d2:
+            assert rebuilt == (moved2 > d2), (step, moved2 ** 0.5, d2 ** 0.5)
+        if rebuilt:
+            x_build = x
+            fired += 1
+        else:
+            reused += 1
+    # both happened, several times
+    assert fired >= 3 and reused >= 10, (fired, reused)
 
 
 def test_reuse_gives_the_same_motion():

@@ -1,0 +1,117 @@
+"""`corpuscle bench` and `corpuscle info` on the real core, and the broken-pipe exit code."""
+import datetime
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytest.importorskip("corpuscle._core")
+
+import corpuscle
+from corpuscle import _core
+from corpuscle.cli import main
+
+BENCH = ["bench", "magic8ball", "--particles", "300", "--steps", "5", "--repeats", "2", "--warmup", "1",
+         "--backend", "cpu", "--no-progress"]
+
+
+def corpuscle_command():
+    """The installed `corpuscle` script next to this Python, else `python -m corpuscle`."""
+    exe = os.path.join(os.path.dirname(sys.executable), "corpuscle")
+    return [exe] if os.path.exists(exe) else [sys.executable, "-m", "corpuscle"]
+
+
+def test_bench_json_rows(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    t0 = time.perf_counter()
+    rc = main(BENCH + ["--json", str(out)])
+    wall = time.perf_counter() - t0
+    assert rc == 0
+    rows = json.loads(out.read_text())
+    assert isinstance(rows, list) and len(rows) == 1
+    row = rows[0]
+    # the fields a benchmark record carries (README "Citing measurements": rates with the
+    # device, the date and the exact command)
+    for key in ("scene", "backend", "particles", "steps", "repeats", "warmup", "steps_per_second",
+                "particle_steps_per_second", "seconds", "device", "date", "command"):
+        assert key in row, key
+    assert (row["scene"], row["backend"], row["particles"], row["steps"], row["repeats"], row["warmup"]) == \
+        ("magic8ball", "cpu", 300, 5, 2, 1)
+    # one timing per repeat, each positive and, being the core's clock around the steps, part
+    # of this call's wall time (seconds, not milliseconds)
+    secs = row["seconds"]
+    assert len(secs) == 2 and all(math.isfinite(s) and s > 0 for s in secs)
+    assert sum(secs) < wall
+    # the rates are those of the median repeat
+    assert row["steps_per_second"] == pytest.approx(5 / statistics.median(secs), rel=1e-12)
+    assert row["particle_steps_per_second"] == pytest.approx(row["steps_per_second"] * 300, rel=1e-12)
+    assert row["steps_per_second"] > 0
+    assert row["command"] == "corpuscle " + " ".join(BENCH + ["--json", str(out)])
+    assert datetime.datetime.fromisoformat(row["date"]).tzinfo is not None
+    assert "OpenMP threads" in row["device"]
+    # the table on stdout shows the same row
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:2] == ["backend", "particles"]
+    cpu = [ln.split() for ln in lines if ln.startswith("cpu")]
+    assert len(cpu) == 1 and cpu[0][1] == "300"
+    assert float(cpu[0][2].replace(",", "")) == pytest.approx(row["steps_per_second"], rel=1e-3, abs=0.06)
+
+
+def test_bench_into_a_closed_pipe_exits_141_quietly():
+    # `corpuscle bench ... | head -1` where the reader has gone: stdout is a pipe with no
+    # reader, the first write fails, and the command stops with 141 (128 + SIGPIPE) and no
+    # traceback, as Unix tools do
+    proc = subprocess.Popen(corpuscle_command() + BENCH, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL)
+    proc.stdout.close()  # before the child can write (it starts Python and runs the bench first)
+    try:
+        err = proc.stderr.read().decode(errors="replace")
+        rc = proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert rc == 141, err
+    assert err.strip() == "", err
+
+
+def test_info_json_is_the_build_info():
+    proc = subprocess.run(corpuscle_command() + ["info", "--json"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["version"] == corpuscle.__version__
+    info = _core.build_info()
+    assert data["build_info"] == json.loads(json.dumps(dict(info), default=str))
+    # the compiled core is the same version as the package
+    assert info["version"] == corpuscle.__version__
+    assert isinstance(info["cuda_compiled"], bool) and isinstance(info["openmp"], bool)
+    assert info["omp_threads"] >= 1
+    if not info["gpus"]:
+        assert info["gpu_error"]  # says why there is none
+
+
+def test_info_text(capsys):
+    assert main(["info"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    info = _core.build_info()
+
+    def row(label):
+        found = [ln.strip()[len(label):].strip() for ln in lines[1:] if ln.strip().startswith(label + " ")]
+        assert len(found) == 1, (label, lines)
+        return found[0]
+
+    assert lines[0] == f"corpuscle {corpuscle.__version__}"
+    assert row("core version") == info["version"]
+    assert row("CUDA").startswith("compiled (architectures:" if info["cuda_compiled"] else "not compiled")
+    assert row("OpenMP") == (f"yes, {info['omp_threads']} threads" if info["openmp"] else "no")
+    gpu_lines = [ln.strip() for ln in lines if ln.strip().startswith("GPU ")]
+    if info["gpus"]:
+        assert len(gpu_lines) == len(info["gpus"]) + (1 if info["gpu_error"] else 0)
+        for i, gpu in enumerate(info["gpus"]):
+            assert gpu_lines[i].startswith(f"GPU {i}") and gpu["name"] in gpu_lines[i]
+    else:
+        assert len(gpu_lines) == 1 and gpu_lines[0].split()[1] == "none"
