@@ -1128,3 +1128,31 @@ def test_last_checkpoint_is_none_without_checkpoints(tmp_path):
     FrameWriter(path, HEADER).close()
     with open_quietly(path) as run:
         assert run.last_checkpoint() is None
+
+
+def test_a_file_full_of_frame_magics_is_scanned_in_bounded_time(tmp_path, monkeypatch):
+    import corpuscle.io as cio
+
+    # frame 0, then a damaged frame 1, then a frame magic at every 64-byte slot, each claiming
+    # index 1 and a table running to the end of the file (and failing its checksum)
+    first = frame_bytes(0, base_table(), BASE_DATA)
+    body = bytearray(64 * 20_000)
+    for k in range(0, len(body), 64):
+        struct.pack_into("<8sQQqddIHHII", body, k, b"CPSFRAME", 128, 1, 0, 0.0, 0.0, len(body) - k - 64, 0, 0, 0, 1)
+    path = crafted_run(tmp_path / "magic.cps", frames=[first, bytes(body)])
+    size = path.stat().st_size
+    # count the bytes checksummed: linear in the file's size, not quadratic (that was ~10 GB)
+    seen = []
+
+    class CountingZlib:
+        @staticmethod
+        def crc32(data, value=0):
+            seen.append(len(data))
+            return zlib.crc32(data, value)
+
+    monkeypatch.setattr(cio, "zlib", CountingZlib)
+    with pytest.warns(TruncatedRunWarning, match="read 1 whole frames"):
+        run = corpuscle.open(path)
+    assert sum(seen) <= 3 * size
+    with run:
+        assert len(run) == 1 and run.torn_bytes == len(body)

@@ -19,6 +19,16 @@ Reading::
     with corpuscle.open("run.cps") as run:
         x = run[-1]["position"]            # float32 (n, 3) view, no copy
         ke = run.series("kinetic_energy")  # one value per frame
+        cp = run.last_checkpoint()         # the state to resume from, or None
+
+Resuming (a torn tail left by a crash is cut off; indices continue)::
+
+    with FrameWriter.append("run.cps", keep=cp.index + 1) as w:
+        w.write_frame(...)
+
+The reader bounds what it accepts (JSON nesting and lengths, array shapes, table contents;
+``docs/frame_format.md``, "Limits"), so a crafted file raises ``FrameStreamError``, never a
+``RecursionError`` or an unbounded allocation.
 """
 
 from __future__ import annotations
@@ -710,6 +720,9 @@ class Run:
         """Index the frames from ``off``; return the number of trailing bytes of a cut frame."""
         size = len(mm)
         entries = self._entries
+        # bytes the forward searches may checksum in all: crafted candidates (a frame magic
+        # every 64 bytes, each claiming a long table) would otherwise cost size**2 / 128
+        budget = 2 * size
         while off < size:
             # the common case: the next frame's header is readable and in sequence
             found = self._frame_header(mm, off)
@@ -721,13 +734,20 @@ class Run:
                 off += entry.frame_len
                 continue
             # damaged header: resume at the next readable header later in the sequence
-            # (the frames skipped over must fit in the bytes skipped, 64 bytes at least each)
+            # (the frames skipped over must fit in the bytes skipped, 64 bytes at least each);
+            # index and length are checked before the checksum, which is paid from the budget
             pos = mm.find(FRAME_MAGIC, off)
             while pos != -1:
-                if pos % ALIGN == 0:
-                    found = self._frame_header(mm, pos)
-                    if found is not None and 0 <= found[1] - len(entries) <= (pos - off) // ALIGN:
-                        break
+                if pos % ALIGN == 0 and pos + ALIGN <= size:
+                    index, = struct.unpack_from("<Q", mm, pos + 16)
+                    if 0 <= index - len(entries) <= (pos - off) // ALIGN:
+                        budget -= 60 + min(struct.unpack_from("<I", mm, pos + 48)[0], size - pos)
+                        if budget < 0:
+                            pos = -1
+                            break
+                        found = self._frame_header(mm, pos)
+                        if found is not None:
+                            break
                 pos = mm.find(FRAME_MAGIC, pos + 1)
             if pos != -1:
                 # frames between are unreadable placeholders that raise on access
