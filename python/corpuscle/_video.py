@@ -195,6 +195,11 @@ def open_sink(out: str | os.PathLike, size: tuple[int, int], fps: float, error: 
     kind = output_kind(out, error)
     if kind == "dir":
         created = missing_dirs(out)
-        return PngDirSink(prepare_dir(out, error), size, fps, error, created=created)
+        folder = prepare_dir(out, error)
+        try:
+            return PngDirSink(folder, size, fps, error, created=created)
+        except BaseException:
+            remove_dirs(created)
+            raise
     path = check_file_output(out, error)
     return {"mp4": Mp4Sink, "gif": GifSink, "png": PngSink}[kind](path, size, fps, error)
