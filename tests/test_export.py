@@ -9,7 +9,6 @@ import pytest
 
 import corpuscle
 from corpuscle._camera import quat_matrix
-from corpuscle._viz_cli import main
 from corpuscle.export import ExportError, export_run
 
 import viz_runs
@@ -176,18 +175,7 @@ def test_vtkhdf_field_data_and_static_obstacle(tmp_path):
             np.testing.assert_allclose(g[f"FieldData/{name}"][:][offs], want)
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["export", "{d}/missing.cps", "{d}/out"], "not found"),
-    (["export", "{d}/m8.cps", "{d}/out", "--format", "stl"], "unknown --format 'stl'"),
-    (["export", "{d}/m8.cps", "{d}/afile"], "not a directory"),
-    (["export", "{d}/m8.cps", "{d}/out", "--frames", "7:"], "selects no frames"),
-    (["export", "{d}/m8.cps"], "required"),
-])
-def test_bad_input_gives_one_line_and_exit_code_2(tmp_path, capsys, argv, words):
-    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=2)
-    (tmp_path / "afile").write_text("x")
-    rc = main([a.format(d=tmp_path) for a in argv])
-    viz_runs.assert_usage_error(rc, capsys.readouterr().err, words)
+# the command line's bad input is tested through the console script: test_viz_console.py
 
 
 def test_missing_h5py_names_the_pip_install(tmp_path, monkeypatch):
@@ -233,3 +221,48 @@ def test_sphere_body_becomes_a_closed_sphere_mesh(tmp_path):
                 key = (min(a, b), max(a, b))
                 edges[key] = edges.get(key, 0) + 1
     assert set(edges.values()) == {2}
+
+
+# ---- failed exports leave no partial output ------------------------------------------------------
+
+
+def test_vtk_export_failing_part_way_leaves_no_file_and_no_new_folder(tmp_path):
+    from cli_script import corrupt_frame, listing
+    from corpuscle.io import FrameStreamError
+
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=5)
+    corrupt_frame(tmp_path / "m8.cps", 3)
+    # frames 0-2 are converted (9 .vtu files), then frame 3 raises
+    with pytest.raises(FrameStreamError, match="frame 3 is corrupted"):
+        export_run(tmp_path / "m8.cps", tmp_path / "new" / "out", progress=False)
+    assert listing(tmp_path) == {"m8.cps"}
+    # into an existing folder: what was there stays, nothing is added
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "notes.txt").write_text("mine")
+    with pytest.raises(FrameStreamError, match="frame 3 is corrupted"):
+        export_run(tmp_path / "m8.cps", tmp_path / "out", progress=False)
+    assert listing(tmp_path / "out") == {"notes.txt"}
+    # the frames before it export fine, and only then do their files appear
+    export_run(tmp_path / "m8.cps", tmp_path / "out", frames=":3", progress=False)
+    assert listing(tmp_path / "out") == {"notes.txt", "m8.pvd"} | {f"{p}_{k:05d}.vtu" for p in ("particles", "ghost", "body_die")
+                                                                 for k in range(3)}
+
+
+def test_vtkhdf_export_failing_part_way_leaves_no_file(tmp_path, monkeypatch):
+    pytest.importorskip("h5py")
+    from cli_script import listing
+    from corpuscle import export
+
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=4)
+    real, calls = export._HdfBlock.add, []
+
+    def fill_the_disk(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 5:  # in the second time step
+            raise OSError(28, "No space left on device")
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(export._HdfBlock, "add", fill_the_disk)
+    with pytest.raises(ExportError, match="cannot write into .*out: No space left on device"):
+        export_run(tmp_path / "m8.cps", tmp_path / "out", format="vtkhdf", progress=False)
+    assert len(calls) == 5 and listing(tmp_path) == {"m8.cps"}

@@ -3,6 +3,8 @@
 import json
 import math
 import mmap
+import os
+import re
 import struct
 import warnings
 import zlib
@@ -668,3 +670,489 @@ def test_writer_rejects_a_header_that_is_not_json_and_creates_no_file(tmp_path):
     with pytest.raises(TypeError, match="must be a dict"):
         FrameWriter(path, ["scene"])
     assert not path.exists()
+
+
+# ---- files crafted by the spec (docs/frame_format.md), independently of the writer ----------
+
+MAGIC = b"\x89CPS\r\n\x1a\n"
+
+
+def align64(n):
+    return -(-n // 64) * 64
+
+
+def file_header_bytes(body: bytes, version=1, json_len=None):
+    """A file header for JSON ``body``: header_crc is the CRC of [0, 28) then [32, first)."""
+    first = align64(32 + len(body))
+    fixed = struct.pack("<8sIIQI", MAGIC, version, 0, len(body) if json_len is None else json_len, 0)
+    pad = bytes(first - 32 - len(body))
+    crc = zlib.crc32(pad, zlib.crc32(body, zlib.crc32(fixed)))
+    return fixed + struct.pack("<I", crc) + body + pad
+
+
+def frame_bytes(index, table, data=b"", step=0, time=0.0, dt=0.1, kind=0, frame_len=None):
+    """A frame: head_crc over [0, 60) then the table, data_crc over [64 + table_len, frame_len)."""
+    meta = table if isinstance(table, bytes) else json.dumps(table).encode()
+    data_start = align64(64 + len(meta))
+    rest = bytes(data_start - 64 - len(meta)) + data + bytes(align64(len(data)) - len(data))
+    length = 64 + len(meta) + len(rest) if frame_len is None else frame_len
+    head = struct.pack("<8sQQqddIHHI", b"CPSFRAME", length, index, step, time, dt, len(meta), kind, 0,
+                       zlib.crc32(rest))
+    return head + struct.pack("<I", zlib.crc32(meta, zlib.crc32(head))) + meta + rest
+
+
+def crafted_run(path, header=b'{"scene":"crafted"}', frames=()):
+    path.write_bytes(file_header_bytes(header) + b"".join(frames))
+    return path
+
+
+def base_table():
+    """A valid table: field x (4 float32), body die (position, orientation), one diagnostic."""
+    return {"groups": {"fluid": 4},
+            "fields": [{"name": "x", "group": "fluid", "dtype": "<f4", "shape": [4], "offset": 0}],
+            "rigid": {"die": {"position": {"dtype": "<f8", "shape": [3], "offset": 64},
+                              "orientation": {"dtype": "<f8", "shape": [4], "offset": 128}}},
+            "diagnostics": {"e": 1.5, "m": "-inf"}}
+
+
+BASE_DATA = (np.arange(4, dtype="<f4").tobytes() + bytes(48) + np.array([1.0, 2.0, 3.0]).tobytes() + bytes(40)
+             + np.array([1.0, 0.0, 0.0, 0.0]).tobytes() + bytes(32))
+
+
+def test_a_frame_crafted_by_the_spec_reads_back(tmp_path):
+    path = crafted_run(tmp_path / "c.cps", frames=[frame_bytes(0, base_table(), BASE_DATA, step=7, time=0.5, kind=1)])
+    with open_quietly(path) as run:
+        run.verify()
+        f = run[0]
+        assert (f.step, f.time, f.kind, f.counts) == (7, 0.5, "checkpoint", {"fluid": 4})
+        np.testing.assert_array_equal(f["x"], [0, 1, 2, 3])
+        np.testing.assert_array_equal(f.rigid["die"]["position"], [1, 2, 3])
+        assert f.diagnostics == {"e": 1.5, "m": -math.inf}
+        assert run.header == {"scene": "crafted"} and run.last_checkpoint().index == 0
+
+
+def _nested(depth):
+    """JSON text of nested arrays ``depth`` deep."""
+    return b"[" * depth + b"]" * depth
+
+
+@pytest.mark.parametrize("body", [_nested(100_000), b'{"a":' * 100_000 + b"1" + b"}" * 100_000,
+                                  b'{"a":' + _nested(32) + b"}"],
+                         ids=["arrays 100000 deep", "objects 100000 deep", "33 deep"])
+def test_deeply_nested_header_json_is_a_one_line_frame_stream_error(tmp_path, body):
+    # was a RecursionError from json (and from anything walking the header afterwards)
+    path = crafted_run(tmp_path / "deep.cps", header=body)
+    with pytest.raises(FrameStreamError, match=r"file header is corrupted \(bad JSON: JSON nested \d+ deep") as err:
+        corpuscle.open(path)
+    assert "\n" not in str(err.value) and str(path) in str(err.value)
+    # so does appending to it
+    with pytest.raises(FrameStreamError, match="nested"):
+        FrameWriter.append(path)
+
+
+def test_nesting_up_to_the_limit_is_read_and_brackets_in_strings_do_not_count(tmp_path):
+    # {"a": 31 arrays deep} is 32 deep: accepted; strings full of brackets are not nesting
+    header = {"a": json.loads(_nested(31)), "s": "[[[{{{" * 1000}
+    path = crafted_run(tmp_path / "ok.cps", header=json.dumps(header).encode())
+    with open_quietly(path) as run:
+        assert run.header == header
+    # the writer writes what the reader reads, and refuses one level more
+    FrameWriter(tmp_path / "w.cps", header).close()
+    with pytest.raises(ValueError, match="nested 33 deep"):
+        FrameWriter(tmp_path / "deeper.cps", {"a": json.loads(_nested(32))})
+    assert not (tmp_path / "deeper.cps").exists()
+
+
+def test_header_json_that_is_not_strict_json_or_not_utf8_is_corrupted(tmp_path):
+    for body in (b'{"h": NaN}', b'{"h": Infinity}', b'{"h": "\xff"}', b'[1, 2]', b'{"h": ' + b"1" * 5000 + b"}"):
+        path = crafted_run(tmp_path / "bad.cps", header=body)
+        with pytest.raises(FrameStreamError, match="file header is corrupted") as err:
+            corpuscle.open(path)
+        assert "\n" not in str(err.value)
+
+
+def test_json_len_beyond_the_file_is_truncation_not_an_overflow(tmp_path):
+    path = tmp_path / "long.cps"
+    for json_len in (2**64 - 1, 2**63, 10**9):
+        path.write_bytes(file_header_bytes(b"{}", json_len=json_len))
+        with pytest.raises(FrameStreamError, match="file header is truncated"):
+            corpuscle.open(path)
+
+
+def _mutate(change):
+    """A table made from the base table by ``change`` (which edits it in place)."""
+    table = base_table()
+    change(table)
+    return table
+
+
+def _field(**kw):
+    return lambda t: t["fields"][0].update(kw)
+
+
+MALFORMED_TABLES = {
+    "huge shape": _field(shape=[10**30]),
+    "negative shape": _field(shape=[-4]),
+    "float shape": _field(shape=[4.0]),
+    "bool shape": _field(shape=[True]),
+    "string shape": _field(shape="4"),
+    "no dimensions": _field(shape=[]),
+    "33 dimensions": _field(shape=[4] + [1] * 32),
+    "extent over 2**62": _field(shape=[4, 2**61]),
+    "<i1 (NumPy writes |i1)": _field(dtype="<i1"),
+    "big-endian": _field(dtype=">f4"),
+    "long double": _field(dtype="<f16"),
+    "object": _field(dtype="O"),
+    "dtype name": _field(dtype="float32"),
+    "unaligned offset": _field(offset=3),
+    "negative offset": _field(offset=-64),
+    "string offset": _field(offset="0"),
+    "offset outside the frame": _field(offset=64 * 100),
+    "count as a string": lambda t: t["groups"].update(fluid="4"),
+    "negative count": lambda t: t["groups"].update(fluid=-1),
+    "count unlike the rows": lambda t: t["groups"].update(fluid=5),
+    "group not listed": _field(group="ghost"),
+    "no name": _field(name=""),
+    "repeated name": lambda t: t["fields"].append(dict(t["fields"][0])),
+    "field not an object": lambda t: t["fields"].append(7),
+    "diagnostic string": lambda t: t["diagnostics"].update(e="hello"),
+    "diagnostic bool": lambda t: t["diagnostics"].update(e=True),
+    "diagnostic object": lambda t: t["diagnostics"].update(e={"v": 1}),
+    "diagnostic null": lambda t: t["diagnostics"].update(e=None),
+    "rigid float32": lambda t: t["rigid"]["die"]["position"].update(dtype="<f4", shape=[6]),
+    "rigid position (4,)": lambda t: t["rigid"]["die"]["position"].update(shape=[4]),
+    "rigid orientation (3,)": lambda t: t["rigid"]["die"]["orientation"].update(shape=[3]),
+    "rigid no orientation": lambda t: t["rigid"]["die"].pop("orientation"),
+    "rigid body not an object": lambda t: t["rigid"].update(die=[1, 2]),
+    "no rigid section": lambda t: t.pop("rigid"),
+    "fields not a list": lambda t: t.update(fields={}),
+    "nested 33 deep": lambda t: t.update(extra=json.loads(_nested(32))),
+    "nested 100000 deep": lambda t: t.update(extra=None),  # replaced by raw JSON below
+}
+
+
+@pytest.mark.parametrize("case", list(MALFORMED_TABLES))
+def test_a_malformed_table_is_a_one_line_error_naming_the_frame(tmp_path, case):
+    table = json.dumps(_mutate(MALFORMED_TABLES[case])).encode()
+    if case == "nested 100000 deep":
+        table = table.replace(b'"extra": null', b'"extra": ' + _nested(100_000))
+    path = crafted_run(tmp_path / "m.cps", frames=[frame_bytes(0, base_table(), BASE_DATA),
+                                                   frame_bytes(1, table, BASE_DATA)])
+    # opening works; frame 1 raises a one-line FrameStreamError naming it, frame 0 still reads
+    with open_quietly(path) as run:
+        assert len(run) == 2
+        run[0]
+        with pytest.raises(FrameStreamError, match="frame 1 is malformed") as err:
+            run[1]
+        assert err.value.frame == 1 and "\n" not in str(err.value)
+        with pytest.raises(FrameStreamError, match="frame 1 is malformed"):
+            run.verify()
+        # the table readers too: never a TypeError, KeyError or RecursionError (where an
+        # array lies is checked against the frame's bytes only when the frame is read)
+        if case == "offset outside the frame":
+            return
+        for read in (lambda: run.field_names, lambda: run.diagnostic_names, lambda: run.series("e")):
+            with pytest.raises(FrameStreamError, match="frame 1 is malformed"):
+                read()
+
+
+def test_table_text_that_is_not_a_json_object_is_malformed(tmp_path):
+    for raw in (b"[]", b"{", b'{"groups": NaN}', b"\xff\xfe", b"null"):
+        path = crafted_run(tmp_path / "t.cps", frames=[frame_bytes(0, raw)])
+        with open_quietly(path) as run, pytest.raises(FrameStreamError, match="frame 0 is malformed"):
+            run[0]
+
+
+def test_a_frame_whose_length_runs_far_past_the_end_is_a_torn_tail(tmp_path):
+    # a readable header (head_crc matches) claiming 2**64 - 64 bytes: truncation, no overflow
+    path = crafted_run(tmp_path / "t.cps", frames=[frame_bytes(0, base_table(), BASE_DATA),
+                                                   frame_bytes(1, base_table(), BASE_DATA, frame_len=2**64 - 64)])
+    with pytest.warns(TruncatedRunWarning, match="read 1 whole frames"):
+        run = corpuscle.open(path)
+    with run:
+        assert len(run) == 1 and run.torn_bytes == len(frame_bytes(1, base_table(), BASE_DATA))
+
+
+@pytest.mark.parametrize("tail", [b"\0", b"\0" * 63, b"\0" * 64, b"\0" * 1000, b"CPSFRAME" + bytes(200),
+                                  bytes(range(256)) * 3],
+                         ids=["1 zero", "63 zeros", "64 zeros", "1000 zeros", "frame magic", "garbage"])
+def test_trailing_bytes_after_the_last_frame_are_a_torn_tail_and_append_cuts_them(tmp_path, tail):
+    path = tmp_path / "run.cps"
+    frames = write_run(path, n_frames=2)
+    size = path.stat().st_size
+    with open(path, "ab") as f:
+        f.write(tail)
+    # ignored with the truncation warning; the whole frames are intact
+    with pytest.warns(TruncatedRunWarning, match=rf"\({len(tail)} trailing bytes ignored\); read 2 whole frames"):
+        run = corpuscle.open(path)
+    with run:
+        assert len(run) == 2 and run.torn_bytes == len(tail)
+        run.verify()
+        assert_frame_equals(run[1], frames[1])
+    # appending cuts them off and carries on
+    with FrameWriter.append(path) as w:
+        assert path.stat().st_size == size and w.frames_written == 2
+        w.write_frame(**frame_data(2))
+    with open_quietly(path) as run:
+        assert len(run) == 3 and run.torn_bytes == 0
+        assert_frame_equals(run[2], frame_data(2))
+
+
+def test_zero_length_arrays_share_their_offset_with_the_next_array(tmp_path):
+    path = tmp_path / "run.cps"
+    with FrameWriter(path, HEADER) as w:
+        w.write_frame(0, 0.0, 0.1, {"empty": np.zeros((0, 3), np.float32), "x": np.arange(5.0),
+                                    "none": np.zeros(0, np.int8)},
+                      groups={"empty": "ghost", "none": "other"})
+    lay = parse_layout(path)
+    fr = lay["frames"][0]
+    offsets = {s["name"]: s["offset"] for s in fr["table"]["fields"]}
+    # "empty" takes no bytes: it starts where "x" does; "none", last, at the region's end
+    assert offsets["empty"] == offsets["x"] == 0
+    assert fr["data_start"] + offsets["none"] == fr["offset"] + fr["frame_len"]
+    with open_quietly(path) as run:
+        f = run[0]
+        assert f["empty"].shape == (0, 3) and f["none"].shape == (0,) and f["none"].dtype == np.int8
+        np.testing.assert_array_equal(f["x"], np.arange(5.0))
+        assert f.counts == {"ghost": 0, "fluid": 5, "other": 0}
+
+
+def test_a_zero_length_array_past_the_data_region_is_malformed(tmp_path):
+    table = base_table()
+    table["groups"]["e"] = 0
+    table["fields"].append({"name": "z", "group": "e", "dtype": "<f4", "shape": [0], "offset": 192})
+    ok = crafted_run(tmp_path / "ok.cps", frames=[frame_bytes(0, table, BASE_DATA)])
+    with open_quietly(ok) as run:
+        assert run[0]["z"].shape == (0,)  # offset 192 is the end of the 192-byte region: fine
+    table["fields"][-1]["offset"] = 256
+    bad = crafted_run(tmp_path / "bad.cps", frames=[frame_bytes(0, table, BASE_DATA)])
+    with open_quietly(bad) as run, pytest.raises(FrameStreamError, match="array outside its frame"):
+        run[0]
+
+
+DOC = (__import__("pathlib").Path(__file__).resolve().parents[1] / "docs" / "frame_format.md").read_text()
+
+
+def test_the_documented_dtypes_are_exactly_what_the_writer_writes_and_the_reader_accepts(tmp_path):
+    from corpuscle.io import DTYPES
+
+    # the list in docs/frame_format.md
+    block = DOC[DOC.index("`dtype` is one of exactly"):DOC.index("One-byte types are written")]
+    documented = re.findall(r"`([|<][a-z]\d+)`", block)
+    assert sorted(documented) == sorted(DTYPES) and len(documented) == len(DTYPES) == 14
+    # every carried NumPy type, as the writer stores it
+    types = [np.bool_, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64,
+             np.float16, np.float32, np.float64, np.complex64, np.complex128]
+    path = tmp_path / "run.cps"
+    with FrameWriter(path, {}) as w:
+        w.write_frame(0, 0.0, 0.1, {f"a{k}": np.zeros(2, t) for k, t in enumerate(types)})
+        w.write_frame(1, 0.0, 0.1, {f"b{k}": np.zeros(2, np.dtype(t).newbyteorder(">")) for k, t in enumerate(types)})
+    lay = parse_layout(path)
+    for fr in lay["frames"]:
+        assert sorted(s["dtype"] for s in fr["table"]["fields"]) == sorted(DTYPES)
+    with open_quietly(path) as run:
+        run.verify()
+    # platform-dependent long doubles and non-numeric arrays are refused
+    with FrameWriter(tmp_path / "x.cps", {}) as w:
+        for bad in (np.zeros(2, np.longdouble), np.zeros(2, np.clongdouble), np.array(["a"]), np.zeros(2, "M8[s]")):
+            if bad.dtype.newbyteorder("<").str in DTYPES:
+                continue  # long double is double on this platform
+            with pytest.raises(TypeError, match="unsupported dtype"):
+                w.write_frame(0, 0.0, 0.1, {"v": bad})
+        with pytest.raises(ValueError, match="at most 32 dimensions"):
+            w.write_frame(0, 0.0, 0.1, {"v": np.zeros((1,) * 33)})
+
+
+def test_checksum_coverage_is_as_documented(tmp_path):
+    # every byte is covered by exactly one CRC except the CRC fields themselves
+    path = tmp_path / "run.cps"
+    write_run(path, n_frames=3)
+    lay = parse_layout(path)
+    cover = np.zeros(len(lay["raw"]), int)
+    cover[0:28] += 1
+    cover[32:lay["first"]] += 1                                  # header_crc
+    for fr in lay["frames"]:
+        off, tl = fr["offset"], fr["table_len"]
+        cover[off:off + 60] += 1
+        cover[off + 64:off + 64 + tl] += 1                       # head_crc
+        cover[off + 64 + tl:off + fr["frame_len"]] += 1          # data_crc
+    uncovered = set(range(28, 32)) | {fr["offset"] + k for fr in lay["frames"] for k in range(60, 64)}
+    assert {int(i) for i in np.flatnonzero(cover == 0)} == uncovered
+    assert set(np.unique(cover)) == {0, 1}
+    # the doc says so in these words
+    assert "Bytes covered by **no** CRC" in DOC and "exactly one CRC" in DOC
+
+
+def test_documented_reading_api_exists(tmp_path):
+    path = tmp_path / "run.cps"
+    write_run(path, n_frames=2)
+    api = DOC[DOC.index("## Reading API"):DOC.index("## Versioning")]
+    run_names = set(re.findall(r"`run\.(\w+)", api))
+    frame_names = set(re.findall(r"`frame\.(\w+)", api))
+    assert {"header", "steps", "times", "kinds", "series", "field_names", "diagnostic_names", "verify",
+            "last_checkpoint", "close"} <= run_names
+    assert {"fields", "rigid", "counts", "groups", "diagnostics", "kind", "index", "step", "time", "dt"} <= frame_names
+    with open_quietly(path) as run:
+        frame = run[0]
+        for name in run_names:
+            assert hasattr(run, name), name
+        for name in frame_names:
+            assert hasattr(frame, name), name
+        assert run.kinds == ["frame", "frame"] and all(isinstance(k, str) for k in run.kinds)
+        assert len(run) == 2 and [f.index for f in run] == [0, 1] and run[-1].index == 1
+
+
+def test_special_files_are_refused_without_blocking(tmp_path):
+    import subprocess
+    import sys
+
+    fifo = tmp_path / "pipe.cps"
+    os.mkfifo(fifo)
+    # in a child process, so a regression (blocking open) fails on the timeout, not by hanging
+    code = ("import corpuscle, sys\ntry:\n    corpuscle.open(sys.argv[1])\nexcept Exception as e:\n"
+            "    print(type(e).__name__, e)")
+    out = subprocess.run([sys.executable, "-c", code, str(fifo)], capture_output=True, text=True, timeout=60)
+    assert out.stdout.startswith("FrameStreamError") and "not a regular file" in out.stdout
+    with pytest.raises(FrameStreamError, match="is a directory"):
+        corpuscle.open(tmp_path)
+
+
+# ---- appending (resume) --------------------------------------------------------------------
+
+def test_append_to_a_complete_file_continues_the_indices(tmp_path):
+    path = tmp_path / "run.cps"
+    frames = write_run(path, n_frames=3)
+    head = parse_layout(path)
+    with FrameWriter.append(path) as w:
+        assert w.frames_written == 3 and w.header == HEADER
+        for k in (3, 4):
+            w.write_frame(**frame_data(k))
+        assert w.frames_written == 5
+    lay = parse_layout(path)
+    # the file header is unchanged byte for byte; indices run on; every frame intact
+    assert lay["raw"][:head["first"]] == head["raw"][:head["first"]]
+    assert [f["index"] for f in lay["frames"]] == [0, 1, 2, 3, 4] and lay["end"] == len(lay["raw"])
+    with open_quietly(path) as run:
+        run.verify()
+        for k, expected in enumerate(frames + [frame_data(3), frame_data(4)]):
+            assert_frame_equals(run[k], expected)
+
+
+def test_append_to_a_file_with_a_torn_tail_cuts_it_back(tmp_path):
+    path = tmp_path / "run.cps"
+    frames = write_run(path, n_frames=3)
+    raw = path.read_bytes()
+    lay = parse_layout(path)
+    last = lay["frames"][-1]["offset"]
+    for cut in sorted({last + 1, last + 63, last + 64, last + 200, len(raw) - 1}):
+        path.write_bytes(raw[:cut])
+        with FrameWriter.append(path) as w:
+            assert w.frames_written == 2 and path.stat().st_size == last
+            w.write_frame(**frame_data(7))
+        with open_quietly(path) as run:
+            assert len(run) == 3 and [f.index for f in run] == [0, 1, 2]
+            run.verify()
+            assert_frame_equals(run[1], frames[1])
+            assert_frame_equals(run[2], frame_data(7))
+    # a file holding only its header gets frame 0
+    path.write_bytes(raw[:lay["first"] + 10])
+    with FrameWriter.append(path) as w:
+        assert w.frames_written == 0
+        w.write_frame(**frame_data(0))
+    with open_quietly(path) as run:
+        assert len(run) == 1 and parse_layout(path)["frames"][0]["index"] == 0
+
+
+def test_append_refuses_what_is_not_a_stream(tmp_path):
+    text = tmp_path / "notes.cps"
+    text.write_text("not a run\n" * 20)
+    empty = tmp_path / "empty.cps"
+    empty.write_bytes(b"")
+    cut = tmp_path / "cut.cps"
+    write_run(cut, n_frames=1)
+    cut.write_bytes(cut.read_bytes()[:40])
+    for path, words in ((text, "not a corpuscle frame stream"), (empty, "empty file"),
+                        (cut, "file header is truncated"), (tmp_path, "is a directory")):
+        before = path.read_bytes() if path.is_file() else None
+        with pytest.raises(FrameStreamError, match=words) as err:
+            FrameWriter.append(path)
+        assert "\n" not in str(err.value)
+        if before is not None:
+            assert path.read_bytes() == before
+    with pytest.raises(FileNotFoundError):
+        FrameWriter.append(tmp_path / "missing.cps")
+
+
+def test_append_refuses_a_file_corrupted_before_its_end_and_leaves_it_alone(tmp_path):
+    path = tmp_path / "run.cps"
+    write_run(path, n_frames=3)
+    lay = parse_layout(path)
+    # a damaged payload in the middle, a damaged header in the middle, a damaged whole last frame
+    for k, pos in ((1, lay["frames"][1]["data_start"] + 5), (1, lay["frames"][1]["offset"] + 20),
+                   (2, lay["frames"][2]["data_start"])):
+        bad = flipped(lay["raw"], pos)
+        path.write_bytes(bad)
+        with pytest.raises(FrameStreamError, match=f"frame {k} is corrupted") as err:
+            FrameWriter.append(path)
+        assert err.value.frame == k and "\n" not in str(err.value)
+        assert path.read_bytes() == bad
+
+
+def test_append_keep_cuts_back_to_a_checkpoint_and_last_checkpoint_finds_it(tmp_path):
+    path = tmp_path / "run.cps"
+    with FrameWriter(path, HEADER) as w:
+        w.write_frame(**frame_data(0))
+        w.write_frame(**frame_data(1), kind="checkpoint")
+        w.write_frame(**frame_data(2))
+        w.write_frame(**frame_data(3), kind="checkpoint")
+        w.write_frame(**frame_data(4))
+    with open_quietly(path) as run:
+        cp = run.last_checkpoint()
+        assert cp.index == 3 and cp.kind == "checkpoint" and cp.step == 30
+    with FrameWriter.append(path, keep=2) as w:
+        assert w.frames_written == 2
+        w.write_frame(**frame_data(9))
+    with open_quietly(path) as run:
+        assert run.kinds == ["frame", "checkpoint", "frame"] and list(run.steps) == [0, 10, 90]
+        assert run.last_checkpoint().index == 1
+        run.verify()
+    with pytest.raises(ValueError, match="keep must be in 0..3"):
+        FrameWriter.append(path, keep=4)
+
+
+def test_last_checkpoint_is_none_without_checkpoints(tmp_path):
+    path = tmp_path / "run.cps"
+    write_run(path, n_frames=2)
+    with open_quietly(path) as run:
+        assert run.last_checkpoint() is None
+    FrameWriter(path, HEADER).close()
+    with open_quietly(path) as run:
+        assert run.last_checkpoint() is None
+
+
+def test_a_file_full_of_frame_magics_is_scanned_in_bounded_time(tmp_path, monkeypatch):
+    import corpuscle.io as cio
+
+    # frame 0, then a damaged frame 1, then a frame magic at every 64-byte slot, each claiming
+    # index 1 and a table running to the end of the file (and failing its checksum)
+    first = frame_bytes(0, base_table(), BASE_DATA)
+    body = bytearray(64 * 20_000)
+    for k in range(0, len(body), 64):
+        struct.pack_into("<8sQQqddIHHII", body, k, b"CPSFRAME", 128, 1, 0, 0.0, 0.0, len(body) - k - 64, 0, 0, 0, 1)
+    path = crafted_run(tmp_path / "magic.cps", frames=[first, bytes(body)])
+    size = path.stat().st_size
+    # count the bytes checksummed: linear in the file's size, not quadratic (that was ~10 GB)
+    seen = []
+
+    class CountingZlib:
+        @staticmethod
+        def crc32(data, value=0):
+            seen.append(len(data))
+            return zlib.crc32(data, value)
+
+    monkeypatch.setattr(cio, "zlib", CountingZlib)
+    with pytest.warns(TruncatedRunWarning, match="read 1 whole frames"):
+        run = corpuscle.open(path)
+    assert sum(seen) <= 3 * size
+    with run:
+        assert len(run) == 1 and run.torn_bytes == len(body)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from corpuscle._viz_cli import main
 from corpuscle.plot import PlotError, plot_run
 
 import viz_runs
@@ -60,24 +59,7 @@ def test_series_can_be_chosen(tmp_path):
         plot_run(tmp_path / "m8.cps", series=["lift"])
 
 
-def test_cli_plot(tmp_path, capsys):
-    viz_runs.write_tunnel(tmp_path / "wt.cps", frames=2)
-    assert main(["plot", str(tmp_path / "wt.cps"), "-o", str(tmp_path / "p.png")]) == 0
-    assert (tmp_path / "p.png").stat().st_size > 1000
-
-
-@pytest.mark.parametrize("argv, words", [
-    (["plot", "{d}/missing.cps", "-o", "{d}/p.png"], "not found"),
-    (["plot", "{d}/m8.cps", "-o", "{d}/p.txt"], ".png"),
-    (["plot", "{d}/m8.cps", "-o", "{d}/nope/p.png"], "does not exist"),
-    (["plot", "{d}/m8.cps", "-o", "{d}/p.png", "--series", "vorticity"], "unknown series 'vorticity'"),
-    (["plot", "{d}/m8.cps", "-o", "{d}/p.png", "--dpi", "x"], "--dpi"),
-    (["plot", "{d}/m8.cps", "-o", "{d}/p.png", "--dpi", "5"], "--dpi"),
-])
-def test_bad_input_gives_one_line_and_exit_code_2(tmp_path, capsys, argv, words):
-    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=2)
-    rc = main([a.format(d=tmp_path) for a in argv])
-    viz_runs.assert_usage_error(rc, capsys.readouterr().err, words)
+# the command line (and its bad input) is tested through the console script: test_viz_console.py
 
 
 def test_missing_matplotlib_names_the_pip_install(tmp_path, monkeypatch):
@@ -87,3 +69,25 @@ def test_missing_matplotlib_names_the_pip_install(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(PlotError, match="pip install matplotlib"):
         plot_run(tmp_path / "m8.cps")
+
+
+def test_a_failed_save_leaves_no_partial_file_and_keeps_the_old_one(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from cli_script import listing
+
+    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=2)
+    plot_run(tmp_path / "m8.cps", tmp_path / "p.png")
+    old = (tmp_path / "p.png").read_bytes()
+
+    def half_written(self, fname, *args, **kwargs):
+        with open(fname, "wb") as f:
+            f.write(b"\x89PNG\r\n\x1a\n half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", half_written)
+    with pytest.raises(PlotError, match="No space left on device"):
+        plot_run(tmp_path / "m8.cps", tmp_path / "p.png")
+    with pytest.raises(PlotError, match="No space left on device"):
+        plot_run(tmp_path / "m8.cps", tmp_path / "q.svg")
+    assert listing(tmp_path) == {"m8.cps", "p.png"} and (tmp_path / "p.png").read_bytes() == old

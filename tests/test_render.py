@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from corpuscle import _colors, _render, render
-from corpuscle._viz_cli import main
 from corpuscle.render import FrameRenderer, LiveRender, RenderError, render_run
 
 import viz_runs
@@ -194,14 +193,63 @@ def test_die_is_a_lit_cube_with_pips_on_the_face_toward_the_camera():
         assert c.min() > 120 and c.max() - c.min() < 40
 
 
-def test_die_faces_away_from_the_light_are_darker():
-    r = FrameRenderer(viz_runs.magic8ball_header(), size=(320, 240), camera="45,30", overlay=False, colorbar=False,
+def camera_light(r):
+    """The key light in world space, from the camera's eye and target alone (docs/rendering.md):
+    (-0.42, 0.56, 0.71) in a frame of screen right, screen up and toward the viewer."""
+    toward = r.camera.eye - r.target
+    toward /= np.linalg.norm(toward)
+    right = np.cross(-toward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -toward)
+    # that frame is the screen's: right moves right on screen, up moves up (smaller row)
+    c, x, y = r.camera.project(np.array([r.target, r.target + 0.01 * right, r.target + 0.01 * up]))[:, :2]
+    assert x[0] > c[0] + 1 and abs(x[1] - c[1]) < 0.5 and y[1] < c[1] - 1 and abs(y[0] - c[0]) < 0.5
+    return -0.42 * right + 0.56 * up + 0.71 * toward
+
+
+def test_die_faces_are_shaded_by_their_angle_to_the_light():
+    # from azimuth 45, elevation 30 the camera sees faces +x (1), +y (2) and +z (3); the light
+    # from the upper left of the screen falls steeply on the top, obliquely on +x, not on +y
+    r = FrameRenderer(viz_runs.magic8ball_header(), size=(640, 480), camera="45,30", overlay=False, colorbar=False,
                       color="none")
     img = r.render(die_frame())
     half = 0.032
-    top = r.camera.project(np.array([[0.3 * half, -0.3 * half, half]]))[0, :2]   # +z face, lit from above
-    side = r.camera.project(np.array([[half, -0.6 * half, -0.6 * half]]))[0, :2]  # +x face
-    assert img[int(top[1]), int(top[0])].mean() != img[int(side[1]), int(side[0])].mean()
+    light = camera_light(r)
+    seen = {}
+    for axis in range(3):
+        normal = np.eye(3)[axis]
+        # a spot on the face clear of every pip layout: 0.75 half-sides out along its second axis
+        spot = normal * half + 0.75 * half * np.eye(3)[max(a for a in range(3) if a != axis)]
+        x, y = r.camera.project(spot[None])[0, :2]
+        seen[axis] = img[int(y), int(x)].astype(int)
+        # Lambert factor 0.38 + 0.62 max(0, n.L) on the ivory die colour
+        expect = np.floor(np.array(render.DIE_RGB) * (0.38 + 0.62 * max(0.0, float(normal @ light))))
+        np.testing.assert_allclose(seen[axis], expect, atol=1.5, err_msg=f"face normal {normal}")
+    # the top is brightest, the +y face (facing away from the light) darkest
+    assert seen[2].sum() > seen[0].sum() + 60 > seen[1].sum() + 120
+
+
+def test_sphere_impostor_is_lit_from_the_upper_left_pixel_for_pixel():
+    # one big grey sphere seen down -z (orthographic, 100 px per unit, radius 20 px)
+    cam = np.array([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 5, 100, 32, 32], np.float32)
+    img = np.zeros((64, 64, 3), np.uint8)
+    depth = np.full((64, 64), np.inf, np.float32)
+    grey = np.array([128, 128, 128], np.uint8)
+    _render.splat(img, depth, np.zeros((1, 3), np.float32), None, cam, True, 0.2, 0.75, None, 0.0, 1.0, 0,
+                  grey, grey, True, True)
+    # every pixel well inside the disc matches the shading model for its surface normal
+    yy, xx = np.mgrid[0:64, 0:64]
+    nx, ny = (xx + 0.5 - 32) / 20, -(yy + 0.5 - 32) / 20
+    inside = nx ** 2 + ny ** 2 < 0.9 ** 2
+    expect = np.array([shade_reference(grey, a, b, math.sqrt(1 - a * a - b * b)) for a, b in zip(nx[inside], ny[inside])])
+    np.testing.assert_allclose(img[inside].astype(int), expect.astype(int), atol=1)
+    # so the upper-left half (toward the light) is brighter than the lower-right half
+    lum = img.astype(int).sum(axis=2)
+    upper_left = inside & (nx - ny < 0)
+    assert lum[upper_left].mean() > lum[inside & (nx - ny > 0)].mean() + 100
+    # and the highlight sits where the normal is the half vector (-0.22, 0.29, 0.93)
+    peak = np.unravel_index(np.argmax(np.where(inside, lum, -1)), lum.shape)
+    assert abs(peak[1] + 0.5 - (32 - 0.22 * 20)) <= 1.5 and abs(peak[0] + 0.5 - (32 - 0.29 * 20)) <= 1.5
 
 
 def test_3d_container_outline_and_particles_are_drawn(tmp_path):
@@ -217,16 +265,29 @@ def test_3d_container_outline_and_particles_are_drawn(tmp_path):
     assert ring_pixels.sum() > 200
 
 
-def test_ghosts_are_drawn_only_when_asked(tmp_path):
-    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=1)
-    import corpuscle
-
-    frame = corpuscle.open(tmp_path / "m8.cps")[0]
+def test_ghosts_are_drawn_only_when_asked_as_small_grey_spheres():
     hdr = viz_runs.magic8ball_header()
-    a = FrameRenderer(hdr, size=(200, 150), overlay=False, colorbar=False).render(frame)
-    b = FrameRenderer(hdr, size=(200, 150), overlay=False, colorbar=False, ghosts=True).render(frame)
-    grey = np.all(b == render.GHOST_RGB, axis=2) | np.all(np.abs(b.astype(int) - 120) < 40, axis=2)
-    assert np.count_nonzero(np.any(a != b, axis=2)) > 50 and grey.any()
+    ghost = np.array([[0.09, -0.02, 0.06]])
+    f = frame_of([[-0.05, 0.0, -0.05], [0.0, 0.05, -0.08]], ghost_position=ghost)
+    f.groups = {"ghost_position": "ghost"}
+    opts = dict(size=(200, 150), overlay=False, colorbar=False, color="none", cutaway=False)
+    a = FrameRenderer(hdr, **opts).render(f)
+    r = FrameRenderer(hdr, ghosts=True, **opts)
+    b = r.render(f)
+    # the only change is a disc around the ghost's projection, at most its radius (0.6 of a
+    # particle's) plus a pixel of antialiasing away
+    x, y = r.camera.project(ghost)[0, :2]
+    radius_px = 0.6 * hdr["particle_radius"] * r.camera.focal / r.camera.view(ghost)[0, 2]
+    ys, xs = np.nonzero(np.any(a != b, axis=2))
+    assert len(xs) >= 0.5 * math.pi * radius_px ** 2
+    assert np.hypot(xs + 0.5 - x, ys + 0.5 - y).max() <= radius_px + 1.5
+    # its centre is the ghost grey (150, 150, 160) lit as a sphere: red = green, a little more
+    # blue, between the darkest and the brightest shade of that grey; before, the background
+    centre = b[int(y), int(x)].astype(int)
+    lo, hi = shade_reference(render.GHOST_RGB, 0.0, -1.0, 0.0), shade_reference(render.GHOST_RGB, -0.22, 0.29, 0.93)
+    assert abs(centre[0] - centre[1]) <= 2 and 0 <= centre[2] - centre[0] <= 14
+    assert np.all(lo <= centre) and np.all(centre <= hi)
+    np.testing.assert_array_equal(a[int(y), int(x)], r._background[int(y), int(x)])
 
 
 def test_no_blank_frames(tmp_path):
@@ -243,12 +304,28 @@ def test_no_blank_frames(tmp_path):
             assert drawn > 0.05, f"{name} frame {frame.index}: only {drawn:.1%} of pixels drawn"
 
 
-def test_overlay_shows_time_and_step():
+def test_overlay_text_changes_with_the_time_and_step_and_nothing_else():
+    from corpuscle import _overlay
+
     hdr = viz_runs.magic8ball_header()
-    f = frame_of(np.zeros((1, 3)))
-    with_text = FrameRenderer(hdr, size=(320, 240), colorbar=False).render(f)
-    without = FrameRenderer(hdr, size=(320, 240), overlay=False, colorbar=False).render(f)
-    assert np.any(with_text[:20, :150] != without[:20, :150])
+    pts = np.array([[0.0, 0.0, -0.05], [0.05, 0.02, -0.08]])
+    early, late = frame_of(pts, t=0.125, step=10), frame_of(pts, t=0.5, step=40)
+    r = FrameRenderer(hdr, size=(320, 240), colorbar=False, color="none")
+    a, b = r.render(early), r.render(late)
+    # the text reads differently, so its pixels differ ...
+    changed = np.any(a != b, axis=2)
+    assert changed.sum() > 30
+    # ... only inside the text's box: the text at (10, 8), whose size the overlay font gives,
+    # on a darkened backing 4 px wider and 3 px taller on each side
+    h, w = _overlay.text_mask("magic8ball   t = 0.5000 s   step 40", max(11, round(240 / 40))).shape
+    box = np.zeros_like(changed)
+    box[8 - 3:8 + h + 3, 10 - 4:10 + w + 4] = True
+    assert not np.any(changed & ~box)
+    # outside the box the picture is the one without text; the same frame draws the same text
+    plain = FrameRenderer(hdr, size=(320, 240), colorbar=False, overlay=False, color="none").render(early)
+    np.testing.assert_array_equal(a[~box], plain[~box])
+    assert np.any(a[box] != plain[box])
+    np.testing.assert_array_equal(r.render(early), a)
 
 
 # ---- outputs ---------------------------------------------------------------------------------
@@ -288,8 +365,17 @@ def test_gif_png_and_png_directory(tmp_path):
     render_run(tmp_path / "wt.cps", tmp_path / "frames", size=(120, 80), value_range="0:20", progress=False)
     render_run(tmp_path / "wt.cps", tmp_path / "last.png", size=(120, 80), value_range="0:20", progress=False)
     np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "last.png")), np.asarray(Image.open(pngs[-1])))
-    render_run(tmp_path / "wt.cps", tmp_path / "first.png", size=(120, 80), frame=0, progress=False)
-    assert not np.array_equal(np.asarray(Image.open(tmp_path / "first.png")), np.asarray(Image.open(pngs[-1])))
+    render_run(tmp_path / "wt.cps", tmp_path / "first.png", size=(120, 80), frame=0, value_range="0:20", progress=False)
+    np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "first.png")), np.asarray(Image.open(pngs[0])))
+    # frames 0 and 3 hold different particles, so their pictures differ in many pixels
+    assert np.any(np.asarray(Image.open(pngs[0])) != np.asarray(Image.open(pngs[-1])), axis=2).sum() > 500
+    # the GIF's frames are frames 0 and 2 (quantised to 255 colours: close, not equal)
+    with Image.open(tmp_path / "wt.gif") as g:
+        for k, want in ((0, 0), (1, 2)):
+            g.seek(k)
+            got = np.asarray(g.convert("RGB")).astype(int)
+            ref = np.asarray(Image.open(pngs[want])).astype(int)
+            assert np.abs(got - ref).mean() < 8
 
 
 def test_live_render_hook_matches_offline_rendering(tmp_path):
@@ -314,48 +400,10 @@ def test_live_render_hook_matches_offline_rendering(tmp_path):
         np.testing.assert_array_equal(a, b)
 
 
-def test_cli_render_writes_a_video(tmp_path, capsys):
-    pytest.importorskip("imageio_ffmpeg")
-    viz_runs.write_tunnel(tmp_path / "wt.cps", frames=3)
-    rc = main(["render", str(tmp_path / "wt.cps"), "-o", str(tmp_path / "wt.mp4"), "--size", "128x96", "-q"])
-    assert rc == 0 and (tmp_path / "wt.mp4").stat().st_size > 0
-
-
 # ---- bad input -------------------------------------------------------------------------------
 
 
-@pytest.fixture
-def runs(tmp_path):
-    viz_runs.write_magic8ball(tmp_path / "m8.cps", frames=3)
-    viz_runs.write_tunnel(tmp_path / "wt.cps", frames=2)
-    return tmp_path
-
-
-@pytest.mark.parametrize("argv, words", [
-    (["render", "{d}/missing.cps", "-o", "{d}/x.png"], "not found"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--color", "vorticity"], "unknown --color field 'vorticity'"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--range", "5:1"], "lo < hi"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--range", "abc"], "--range must be lo:hi"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--range", "0:nan"], "finite"),
-    (["render", "{d}/m8.cps", "-o", "{d}/no/such/dir/x.mp4"], "does not exist"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.avi"], ".mp4, .gif or .png"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--frame", "99"], "out of range"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--frames", "5:2"], "selects no frames"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--frames", "0:3:0"], "step"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--size", "12x9000"], "--size"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--size", "161x120"], "even"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--camera", "30"], "--camera"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--camera", "30,95"], "elevation"),
-    (["render", "{d}/wt.cps", "-o", "{d}/x.png", "--camera", "30,20"], "3-D"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.mp4", "--fps", "0"], "--fps"),
-    (["render", "{d}/m8.cps", "-o", "{d}/x.png", "--ramp", "rainbow"], "invalid choice"),
-    (["render", "{d}/m8.cps"], "required"),
-    (["render", "{d}/notarun.cps", "-o", "{d}/x.png"], "cannot read run"),
-])
-def test_bad_input_gives_one_line_and_exit_code_2(runs, capsys, argv, words):
-    (runs / "notarun.cps").write_bytes(b"hello, not a frame stream" * 10)
-    rc = main([a.format(d=runs) for a in argv])
-    viz_runs.assert_usage_error(rc, capsys.readouterr().err, words)
+# the command line's bad input is tested through the console script: test_viz_console.py
 
 
 def test_errors_are_value_errors_for_the_cli_table():
@@ -404,3 +452,125 @@ def test_2d_rigid_body_with_an_angle_is_drawn_rotated():
     side = r.camera.project(np.array([[1.65, 0.5]]))[0, :2]
     np.testing.assert_array_equal(img[int(up[1]), int(up[0])], render.DIE_RGB)
     assert not np.array_equal(img[int(side[1]), int(side[0])], render.DIE_RGB)
+
+
+# ---- rendering while recording equals rendering afterwards ---------------------------------------
+
+
+def test_live_render_of_corpuscle_run_equals_offline_render_pixel_for_pixel(tmp_path):
+    # `corpuscle run --render` draws each frame from the record it writes, with the same
+    # renderer as `corpuscle render` reading the file back; the float32 fields are stored
+    # bit for bit, so with a fixed colour range (without one, the live range widens as
+    # frames come while the offline one samples the whole run) the pictures are identical
+    pytest.importorskip("corpuscle._core")
+    from PIL import Image
+
+    from cli_script import corpuscle
+
+    run = tmp_path / "run.cps"
+    proc = corpuscle("run", "magic8ball", "--particles", "300", "--steps", "20", "--every", "10", "--velocity",
+                     "--no-progress", "--out", run, "--render", tmp_path / "live", "--render-size", "160x120",
+                     "--render-range", "0:0.5", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    proc = corpuscle("render", run, "-o", tmp_path / "offline", "--size", "160x120", "--range", "0:0.5", "-q")
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    names = sorted(p.name for p in (tmp_path / "live").iterdir())
+    assert names == sorted(p.name for p in (tmp_path / "offline").iterdir()) == [f"frame_{k:05d}.png" for k in range(3)]
+    for name in names:
+        live = np.asarray(Image.open(tmp_path / "live" / name))
+        offline = np.asarray(Image.open(tmp_path / "offline" / name))
+        np.testing.assert_array_equal(live, offline)
+        assert np.any(live != live[0, 0], axis=2).mean() > 0.05  # and they are not blank
+
+
+# ---- failed renders leave no partial output ------------------------------------------------------
+
+
+@pytest.fixture
+def damaged(tmp_path):
+    """A 20-frame run whose frame 8 fails its checksum, and an empty output folder. (Frame 8 is
+    not among the 12 frames render_run samples for its colour range, so a render without a
+    range still gets through frames 0-7 before it meets it.)"""
+    from cli_script import corrupt_frame
+
+    run = tmp_path / "runs" / "m8.cps"
+    run.parent.mkdir()
+    viz_runs.write_magic8ball(run, frames=20, n=200)
+    corrupt_frame(run, 8)
+    (tmp_path / "work").mkdir()
+    return run, tmp_path / "work"
+
+
+@pytest.mark.parametrize("out", ["m8.mp4", "m8.gif", "frames", "new/frames"])
+def test_render_failing_part_way_leaves_no_partial_output(damaged, out):
+    from cli_script import listing
+    from corpuscle.io import FrameStreamError
+
+    run, work = damaged
+    if out == "m8.mp4":
+        pytest.importorskip("imageio_ffmpeg")
+    # frames 0-7 are drawn and encoded, then frame 8 raises
+    with pytest.raises(FrameStreamError, match="frame 8 is corrupted"):
+        render_run(run, work / out, size=(64, 48), value_range=None if out == "m8.gif" else "0:1", progress=False)
+    assert listing(work) == set()
+
+
+def test_render_whose_encoder_fails_part_way_leaves_no_partial_output(damaged, monkeypatch):
+    from cli_script import listing
+    from corpuscle import _video
+
+    run, work = damaged
+    real = _video.PngDirSink._add
+
+    def fill_the_disk(self, image):
+        if self.frames == 2:
+            raise OSError(28, "No space left on device")
+        real(self, image)
+
+    monkeypatch.setattr(_video.PngDirSink, "_add", fill_the_disk)
+    (work / "frames").mkdir()
+    (work / "frames" / "notes.txt").write_text("mine")
+    with pytest.raises(RenderError, match="cannot write .*frames: No space left on device"):
+        render_run(run, work / "frames", size=(64, 48), value_range="0:1", frames="0:3", progress=False)
+    # the frames written before are gone; what was in the folder stays
+    assert listing(work) == {"frames", "frames/notes.txt"}
+
+
+def test_png_whose_save_fails_leaves_nothing_and_keeps_the_old_file(damaged, monkeypatch):
+    from PIL import Image
+
+    from cli_script import listing
+
+    run, work = damaged
+    render_run(run, work / "m8.png", size=(64, 48), frame=0, progress=False)
+    old = (work / "m8.png").read_bytes()
+
+    def half_written(self, fp, *args, **kwargs):
+        with open(fp, "wb") as f:
+            f.write(b"\x89PNG\r\n\x1a\n half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Image.Image, "save", half_written)
+    with pytest.raises(RenderError, match="No space left on device"):
+        render_run(run, work / "m8.png", size=(64, 48), frame=1, progress=False)
+    assert listing(work) == {"m8.png"} and (work / "m8.png").read_bytes() == old
+
+
+def test_live_render_left_by_an_exception_leaves_nothing(damaged):
+    import corpuscle
+    from cli_script import listing
+
+    run, work = damaged
+    frames = corpuscle.open(run)
+    with pytest.raises(RuntimeError, match="simulation blew up"):
+        with LiveRender(work / "live.gif", frames.header, size=(64, 48), value_range="0:1") as live:
+            live.add_frame(frames[0])
+            live.add_frame(frames[1])
+            raise RuntimeError("simulation blew up")
+    assert listing(work) == set()
+    # closed normally, the output appears, with every frame, and only then
+    with LiveRender(work / "live", frames.header, size=(64, 48), value_range="0:1") as live:
+        for k in range(3):
+            live.add_frame(frames[k])
+            assert not list((work / "live").glob("frame_*.png"))
+    assert listing(work) == {"live"} | {f"live/frame_{k:05d}.png" for k in range(3)}

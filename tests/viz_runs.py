@@ -90,11 +90,3 @@ def write_points(path, header: dict, positions, values=None, field: str = "press
             if values is not None:
                 fields[field] = np.asarray(values, np.float32)
             w.write_frame(k, 0.5 * k, 1e-3, fields)
-
-
-def assert_usage_error(rc: int, stderr: str, words: str) -> None:
-    """Bad input: exit code 2 and one line ``corpuscle: error: ...`` naming ``words``."""
-    lines = stderr.strip().splitlines()
-    assert rc == 2, stderr
-    assert len(lines) == 1 and lines[0].startswith("corpuscle: error: "), stderr
-    assert words in lines[0]

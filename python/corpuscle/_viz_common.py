@@ -8,9 +8,15 @@ subclass) so each subcommand reports bad input in its own name.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import math
 import os
 import re
+import secrets
+import stat
+import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +53,7 @@ def units_of(name: str, header: dict | None = None) -> str:
 def _is_dem(header: dict) -> bool:
     """True for soft-sphere (DEM) scenes, whose "pressure" is a contact-force sum."""
     kind = header.get("kind") or _find_key(header.get("parameters") or header.get("scene") or {}, "kind")
-    text = f"{kind} {scene_info(header)['name']}".lower()
+    text = f"{kind} {scene_name(header)}".lower()
     return any(w in text for w in ("dem", "wind", "tunnel", "gas", "granular"))
 
 
@@ -56,29 +62,138 @@ def is_run_like(obj: Any) -> bool:
     return hasattr(obj, "header") and hasattr(obj, "__getitem__") and hasattr(obj, "__len__")
 
 
+def one_line(exc: BaseException | str) -> str:
+    """A message on one line: its first non-empty line, or the exception's type name."""
+    text = str(exc).strip()
+    if not text:
+        return type(exc).__name__ if isinstance(exc, BaseException) else ""
+    return text.splitlines()[0].strip()
+
+
+def os_reason(exc: OSError) -> str:
+    """``No such file or directory``, not ``[Errno 2] No such file or directory: 'x'``."""
+    return exc.strerror or one_line(exc)
+
+
 def open_run(run: Any, error: type[ValueError]):
     """Open ``run`` (a path or an already opened Run) or raise ``error`` with one line."""
     if is_run_like(run):
         return run
     path = Path(os.fspath(run))
-    if not path.exists():
-        raise error(f"run file not found: {path}")
-    if path.is_dir():
-        raise error(f"run must be a recorded frame stream file, got a directory: {path}")
     try:
-        import corpuscle
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise error(f"run file not found: {path}") from None
+    except OSError as exc:
+        raise error(f"cannot read run {path}: {os_reason(exc)}") from None
+    if stat.S_ISDIR(mode):
+        raise error(f"run must be a recorded frame stream file, got a directory: {path}")
+    if not stat.S_ISREG(mode):
+        raise error(f"run must be a recorded frame stream file, got a special file: {path}")
+    try:
+        from corpuscle import io as cio
 
-        opener = getattr(corpuscle, "open", None)
-        if opener is None:
-            from corpuscle import io as cio
-
-            opener = cio.open
-        return opener(path)
+        return cio.open(path)
     except ImportError as exc:
-        raise error(f"cannot read runs: corpuscle.io is unavailable ({exc})") from None
-    except (ValueError, OSError, EOFError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise error(f"cannot read run {path}: {msg}") from None
+        raise error(f"cannot read runs: corpuscle.io is unavailable ({one_line(exc)})") from None
+    except OSError as exc:
+        raise error(f"cannot read run {path}: {os_reason(exc)}") from None
+    except (ValueError, EOFError) as exc:
+        # the reader's messages start with the path already
+        msg = one_line(exc)
+        prefix = f"{path}: "
+        raise error(f"cannot read run {path}: {msg[len(prefix):] if msg.startswith(prefix) else msg}") from None
+
+
+# ---- warnings on the command line ----------------------------------------------------------
+
+
+@contextlib.contextmanager
+def cli_warnings(prog: str = "corpuscle"):
+    """Print each warning raised inside as one line, ``corpuscle: warning: <message>``.
+
+    The ``warnings`` module's default format shows an internal path and source line; on the
+    command line a warning about the user's file (a truncated run, say) is one clean line.
+    Repeats of the same message print once. The Python API keeps normal warnings.
+    """
+    try:
+        from corpuscle.io import TruncatedRunWarning
+    except ImportError:  # a stand-in io module (tests): every warning is then "other"
+        TruncatedRunWarning = type("TruncatedRunWarning", (UserWarning,), {})
+
+    shown = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = one_line(message)
+        if not (issubclass(category, TruncatedRunWarning) or category.__module__.startswith("corpuscle")):
+            text = f"{category.__name__}: {text}"
+        if text not in shown:
+            shown.add(text)
+            print(f"{prog}: warning: {text}", file=sys.stderr, flush=True)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", TruncatedRunWarning)
+        warnings.showwarning = show
+        yield
+
+
+# ---- outputs written whole or not at all ---------------------------------------------------
+
+
+def temp_path(final: str | os.PathLike) -> Path:
+    """A fresh hidden name next to ``final`` with the same suffix (encoders pick the format by it)."""
+    p = Path(os.fspath(final))
+    return p.with_name(f".{p.name}.{secrets.token_hex(4)}.part{p.suffix}")
+
+
+class AtomicOutputs:
+    """Files written under temporary names in their own folders and moved into place together.
+
+    ``path(final)`` gives the temporary name to write ``final`` to; ``commit()`` moves every
+    one into place (``os.replace``, in the order they were asked for, so the file that lists
+    the others can come last); ``discard()`` removes the temporaries. A failed render or
+    export thus leaves no partial file behind: either the whole output or none of it.
+    Use as a context manager: leaving with an exception discards, otherwise nothing happens
+    until ``commit()``.
+    """
+
+    def __init__(self):
+        self._pending: dict[Path, Path] = {}
+
+    def path(self, final: str | os.PathLike) -> Path:
+        """The temporary name for ``final`` (the same one when asked again)."""
+        final = Path(os.fspath(final))
+        if final not in self._pending:
+            self._pending[final] = temp_path(final)
+        return self._pending[final]
+
+    def commit(self) -> list[Path]:
+        """Move every written temporary into place; returns the final paths."""
+        done = []
+        try:
+            for final, tmp in list(self._pending.items()):
+                if tmp.exists():
+                    os.replace(tmp, final)
+                    done.append(final)
+                del self._pending[final]
+        except BaseException:
+            self.discard()
+            raise
+        return done
+
+    def discard(self) -> None:
+        """Remove every temporary not yet moved into place."""
+        pending, self._pending = self._pending, {}
+        for tmp in pending.values():
+            with contextlib.suppress(FileNotFoundError, OSError):
+                os.unlink(tmp)
+
+    def __enter__(self) -> "AtomicOutputs":
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        if exc_type is not None:
+            self.discard()
 
 
 def require(module: str, pip_name: str, what: str, error: type[ValueError]):
@@ -170,6 +285,21 @@ def prepare_dir(path: str | os.PathLike, error: type[ValueError]) -> Path:
     return p
 
 
+def missing_dirs(path: str | os.PathLike) -> list[Path]:
+    """The folders ``prepare_dir(path)`` would create, the deepest first."""
+    p = Path(os.path.abspath(os.fspath(path)))
+    return [q for q in (p, *p.parents) if not q.exists()]
+
+
+def remove_dirs(dirs: list[Path]) -> None:
+    """Remove folders made for an output that failed, deepest first, as long as they are empty."""
+    for d in dirs:
+        try:
+            d.rmdir()
+        except OSError:
+            return
+
+
 def run_stem(run: Any, default: str = "run") -> str:
     """A file-name stem for outputs derived from a run: its file name, else its scene."""
     path = getattr(run, "path", None)
@@ -177,7 +307,7 @@ def run_stem(run: Any, default: str = "run") -> str:
         stem = Path(os.fspath(path)).name.split(".")[0]
         if stem:
             return stem
-    name = scene_info(getattr(run, "header", None))["name"]
+    name = scene_name(getattr(run, "header", None))
     return re.sub(r"[^A-Za-z0-9_-]+", "_", name) if name else default
 
 
@@ -209,6 +339,97 @@ def _vector3(value: Any) -> list[float] | None:
 DIE_FACES = {"1": [1, 0, 0], "6": [-1, 0, 0], "2": [0, 1, 0], "5": [0, -1, 0], "3": [0, 0, 1], "4": [0, 0, -1]}
 
 
+class HeaderError(ValueError):
+    """A run header whose scene description (container, bodies, obstacles ...) is malformed."""
+
+
+def _number(value: Any, what: str, positive: bool = False) -> float:
+    """A finite JSON number (not a bool), else HeaderError naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise HeaderError(f"run header: {what} must be a finite number, got {_short(value)}")
+    if positive and value <= 0:
+        raise HeaderError(f"run header: {what} must be positive, got {value!r}")
+    return float(value)
+
+
+def _numbers(value: Any, what: str, lo: int = 1, hi: int = 3) -> list[float]:
+    """A list of ``lo``..``hi`` finite numbers, else HeaderError."""
+    if not isinstance(value, (list, tuple)) or not lo <= len(value) <= hi:
+        raise HeaderError(f"run header: {what} must be a list of {lo}..{hi} numbers, got {_short(value)}")
+    return [_number(v, what) for v in value]
+
+
+def _short(value: Any) -> str:
+    """A value for a one-line message, cut to 40 characters."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _check_container(c: dict) -> dict:
+    """A container description with numbers where the renderer and exporter need them."""
+    out = dict(c)
+    if c["type"] == "box":
+        out["min"], out["max"] = _numbers(c.get("min"), "container.min"), _numbers(c.get("max"), "container.max")
+    elif c["type"] == "sphere":
+        out["center"] = _numbers(c.get("center", [0.0, 0.0, 0.0]), "container.center")
+        out["radius"] = _number(c.get("radius"), "container.radius", positive=True)
+    return out
+
+
+def _check_obstacle(ob: Any, k: int) -> dict:
+    if not isinstance(ob, dict):
+        raise HeaderError(f"run header: obstacles[{k}] must be an object, got {_short(ob)}")
+    out = dict(ob)
+    if ob.get("points") is not None:
+        pts = ob["points"]
+        if not isinstance(pts, list):
+            raise HeaderError(f"run header: obstacles[{k}].points must be a list of points")
+        out["points"] = [_numbers(q, f"obstacles[{k}].points", 2, 3) for q in pts]
+        if len({len(q) for q in out["points"]}) > 1:
+            raise HeaderError(f"run header: obstacles[{k}].points mixes 2-D and 3-D points")
+    return out
+
+
+def _check_body(b: Any, k: int) -> dict:
+    if not isinstance(b, dict):
+        raise HeaderError(f"run header: bodies[{k}] must be an object, got {_short(b)}")
+    out = dict(b)
+    if not isinstance(b.get("name", ""), str) or not isinstance(b.get("shape", ""), str):
+        raise HeaderError(f"run header: bodies[{k}] name and shape must be strings")
+    if "half_extents" in b:
+        out["half_extents"] = _numbers(b["half_extents"], f"bodies[{k}].half_extents")
+    if b.get("radius") is not None:
+        out["radius"] = _number(b["radius"], f"bodies[{k}].radius", positive=True)
+    faces = b.get("faces")
+    if faces is not None:
+        if not isinstance(faces, dict):
+            raise HeaderError(f"run header: bodies[{k}].faces must be an object")
+        out["faces"] = {str(label): _numbers(n, f"bodies[{k}].faces", 3, 3) for label, n in faces.items()}
+    return out
+
+
+def _params(h: dict) -> dict:
+    """The scene's parameter table in a header ("parameters", or "scene" as a dict)."""
+    params = h.get("parameters") if isinstance(h.get("parameters"), dict) else None
+    if params is None and isinstance(h.get("scene"), dict):
+        params = h["scene"]
+    return params or {}
+
+
+def scene_name(header: dict | None) -> str:
+    """The scene's name: the header's "scene" string, else the scene table's name or kind.
+
+    Never fails, so plots and file names work whatever the rest of the header holds.
+    """
+    h = header if isinstance(header, dict) else {}
+    name = h.get("scene") if isinstance(h.get("scene"), str) else None
+    if name is None:
+        params = _params(h)
+        meta = params.get("scene") if isinstance(params.get("scene"), dict) else {}
+        name = meta.get("name") or h.get("kind") or meta.get("kind") or ""
+    return name if isinstance(name, str) else ""
+
+
 def scene_info(header: dict | None) -> dict:
     """The scene geometry a run header describes, in the simulator's conventions.
 
@@ -218,31 +439,39 @@ def scene_info(header: dict | None) -> dict:
     ``"parameters"`` as the nested scene dict) gets a sphere container from
     ``container.radius`` and a die box from ``die.side``.
     """
+    if not isinstance(header or {}, dict):
+        raise HeaderError(f"run header must be a JSON object, got {type(header).__name__}")
     h = dict(header or {})
-    params = h.get("parameters") if isinstance(h.get("parameters"), dict) else None
-    if params is None and isinstance(h.get("scene"), dict):
-        params = h["scene"]
-    params = params or {}
-    # name: a string, or the scene table's name
-    name = h.get("scene") if isinstance(h.get("scene"), str) else None
-    if name is None:
-        meta = params.get("scene") if isinstance(params.get("scene"), dict) else {}
-        name = meta.get("name") or h.get("kind") or meta.get("kind") or ""
+    params = _params(h)
+    name = scene_name(h)
     container = h.get("container") if isinstance(h.get("container"), dict) and "type" in h["container"] else None
     if container is None and isinstance(params.get("container"), dict) and "radius" in params["container"]:
-        container = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": float(params["container"]["radius"])}
-    bodies = list(h.get("bodies") or [])
+        container = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": params["container"]["radius"]}
+    if container is not None:
+        container = _check_container(container)
+    bodies = h.get("bodies") or []
+    if not isinstance(bodies, list):
+        raise HeaderError(f"run header: bodies must be a list, got {_short(bodies)}")
     if not bodies and isinstance(params.get("die"), dict) and "side" in params["die"]:
-        half = 0.5 * float(params["die"]["side"])
+        half = 0.5 * _number(params["die"]["side"], "die.side", positive=True)
         bodies = [{"name": "die", "shape": "box", "half_extents": [half] * 3, "faces": DIE_FACES}]
+    obstacles = h.get("obstacles") or []
+    if not isinstance(obstacles, list):
+        raise HeaderError(f"run header: obstacles must be a list, got {_short(obstacles)}")
+    dim = h.get("dim")
+    if dim is not None:
+        if isinstance(dim, bool) or not isinstance(dim, (int, float)) or dim not in (1, 2, 3):
+            raise HeaderError(f"run header: dim must be 1, 2 or 3, got {_short(dim)}")
+        dim = int(dim)
     radius = h.get("particle_radius")
+    up = h.get("up")
     return {
         "name": str(name),
-        "dim": int(h["dim"]) if h.get("dim") else None,
+        "dim": dim or None,
         "container": container,
-        "obstacles": list(h.get("obstacles") or []),
-        "bodies": bodies,
-        "particle_radius": float(radius) if radius else None,
+        "obstacles": [_check_obstacle(ob, k) for k, ob in enumerate(obstacles)],
+        "bodies": [_check_body(b, k) for k, b in enumerate(bodies)],
+        "particle_radius": _number(radius, "particle_radius", positive=True) if radius else None,
         "gravity": _vector3(_find_key(h, "gravity")),
-        "up": h.get("up"),
+        "up": up if isinstance(up, str) else None,
     }

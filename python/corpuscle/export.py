@@ -28,7 +28,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ._camera import quat_matrix
-from ._viz_common import open_run, parse_frames, prepare_dir, require, run_stem, scene_info
+from ._viz_common import (AtomicOutputs, cli_warnings, missing_dirs, open_run, os_reason, parse_frames, prepare_dir,
+                          remove_dirs, require, run_stem, scene_info)
 
 
 class ExportError(ValueError):
@@ -281,27 +282,29 @@ def write_vtu(path: Path, part: Part) -> None:
         f.write(b"\n</AppendedData>\n</VTKFile>\n")
 
 
-def _export_vtk(run, indices, out: Path, stem: str, bar) -> Path:
+def _export_vtk(run, indices, out: Path, stem: str, bar, files: AtomicOutputs) -> Path:
+    """Every .vtu and the .pvd, written to temporary names in ``files`` (the caller commits)."""
     entries = []
     header = run.header or {}
     statics = static_parts(header)
     for part in statics:
-        write_vtu(out / f"{part.name}.vtu", part)
+        write_vtu(files.path(out / f"{part.name}.vtu"), part)
     for i in indices:
         frame = run[i]
         parts = frame_parts(frame, header)
         names = [p.name for p in parts] + [p.name for p in statics]
         for p in parts:
             fname = f"{p.name}_{i:05d}.vtu"
-            write_vtu(out / fname, p)
+            write_vtu(files.path(out / fname), p)
             entries.append((frame.time, names.index(p.name), p.name, fname))
         for p in statics:
             entries.append((frame.time, names.index(p.name), p.name, f"{p.name}.vtu"))
         bar.update(1)
+    # the collection last: it is moved into place after every file it lists
     pvd = out / f"{stem}.pvd"
     rows = [f'<DataSet timestep="{t!r}" part="{k}" name={quoteattr(n)} file={quoteattr(f)}/>' for t, k, n, f in entries]
-    pvd.write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="1.0" byte_order="LittleEndian">\n'
-                   "<Collection>\n" + "\n".join(rows) + "\n</Collection>\n</VTKFile>\n")
+    files.path(pvd).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="1.0" byte_order="LittleEndian">\n'
+                               "<Collection>\n" + "\n".join(rows) + "\n</Collection>\n</VTKFile>\n")
     return pvd
 
 
@@ -394,7 +397,7 @@ def _schema(parts: list[Part]) -> dict:
     return s
 
 
-def _export_vtkhdf(run, indices, out: Path, stem: str, bar) -> Path:
+def _export_vtkhdf(run, indices, out: Path, stem: str, bar, files: AtomicOutputs) -> Path:
     h5py = require("h5py", "h5py", "--format vtkhdf", ExportError)
     header = run.header or {}
     # pass 1: which blocks exist and which arrays each carries (reads shapes, not data)
@@ -409,7 +412,7 @@ def _export_vtkhdf(run, indices, out: Path, stem: str, bar) -> Path:
                                         {k: v[:0] for k, v in p.cell_data.items()}, p.field_data))
     statics = static_parts(header)
     path = out / f"{stem}.vtkhdf"
-    with h5py.File(path, "w", track_order=True) as f:
+    with h5py.File(files.path(path), "w", track_order=True) as f:
         root = f.create_group("VTKHDF", track_order=True)
         root.attrs["Version"] = np.array([2, 2], np.int64)
         root.attrs.create("Type", np.bytes_("PartitionedDataSetCollection"),
@@ -446,22 +449,36 @@ def export_run(run, out_dir, *, format: str = "vtk", frames=None, progress: bool
         raise ExportError(f"unknown --format '{format}': choose {' or '.join(FORMATS)}")
     run = open_run(run, ExportError)
     indices = parse_frames(frames, len(run), ExportError)
+    created = missing_dirs(out_dir)
     out = prepare_dir(out_dir, ExportError)
     stem = run_stem(run)
     from tqdm import tqdm
 
+    # every file is written under a temporary name and moved into place only when the whole
+    # export succeeded; a failure part-way (a corrupted frame, a full disk, Ctrl-C) leaves none
+    files = AtomicOutputs()
     try:
         with tqdm(total=len(indices), unit="frame", desc="export", leave=False,
                   disable=None if progress is None else not progress) as bar:
-            if format == "vtk":
-                return _export_vtk(run, indices, out, stem, bar)
-            return _export_vtkhdf(run, indices, out, stem, bar)
-    except OSError as exc:
-        raise ExportError(f"cannot write into {out}: {exc.strerror or exc}") from None
+            writer = _export_vtk if format == "vtk" else _export_vtkhdf
+            result = writer(run, indices, out, stem, bar, files)
+        files.commit()
+    except BaseException as exc:
+        files.discard()
+        remove_dirs(created)  # the folders this export made, if empty again
+        if isinstance(exc, OSError):
+            raise ExportError(f"cannot write into {out}: {os_reason(exc)}") from None
+        raise
+    return result
 
 
 def run_command(args: argparse.Namespace) -> int:
     """Run ``corpuscle export`` from parsed arguments; returns the exit code."""
+    with cli_warnings():
+        return _run_command(args)
+
+
+def _run_command(args: argparse.Namespace) -> int:
     path = export_run(args.run, args.output, format=args.format, frames=args.frames,
                       progress=False if args.quiet else None)
     if not args.quiet:

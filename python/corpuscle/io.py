@@ -19,6 +19,16 @@ Reading::
     with corpuscle.open("run.cps") as run:
         x = run[-1]["position"]            # float32 (n, 3) view, no copy
         ke = run.series("kinetic_energy")  # one value per frame
+        cp = run.last_checkpoint()         # the state to resume from, or None
+
+Resuming (a torn tail left by a crash is cut off; indices continue)::
+
+    with FrameWriter.append("run.cps", keep=cp.index + 1) as w:
+        w.write_frame(...)
+
+The reader bounds what it accepts (JSON nesting and lengths, array shapes, table contents;
+``docs/frame_format.md``, "Limits"), so a crafted file raises ``FrameStreamError``, never a
+``RecursionError`` or an unbounded allocation.
 """
 
 from __future__ import annotations
@@ -29,6 +39,8 @@ import math
 import mmap
 import operator
 import os
+import re
+import stat
 import struct
 import warnings
 import zlib
@@ -60,10 +72,26 @@ assert _FILE_HEAD.size == 32 and _FRAME_HEAD.size == ALIGN
 _KIND_CODES = {"frame": 0, "checkpoint": 1}
 _KIND_NAMES = {code: name for name, code in _KIND_CODES.items()}
 
-# array element kinds the stream carries: bool, signed, unsigned, float, complex
-_DTYPE_KINDS = "biufc"
+# the array dtypes the stream carries, exactly as written in frame tables (NumPy's
+# ``dtype.str``): bool, signed and unsigned integers, IEEE floats and complex numbers.
+# Platform-dependent types (long double) are refused: their bytes mean different things
+# on different machines.
+DTYPES = ("|b1", "|i1", "|u1", "<i2", "<i4", "<i8", "<u2", "<u4", "<u8",
+          "<f2", "<f4", "<f8", "<c8", "<c16")
 _RESERVED_SERIES = ("step", "time", "dt")
 _ZEROS = bytes(ALIGN)
+
+# limits on what a reader accepts (and a writer writes), so a crafted file cannot make the
+# reader recurse, allocate or loop without bound (docs/frame_format.md, "Limits")
+MAX_JSON_DEPTH = 32             # nesting of arrays and objects in the header JSON and tables
+MAX_HEADER_JSON = 64 << 20      # bytes of header JSON
+MAX_TABLE_JSON = 16 << 20       # bytes of one frame's JSON table
+MAX_NDIM = 32                   # dimensions of one array
+MAX_ARRAY_EXTENT = 1 << 62      # product of an array's non-zero dimensions times its item size
+_DIAGNOSTIC_STRINGS = ("nan", "inf", "-inf")
+
+# a JSON string literal (escapes included), for measuring nesting outside strings
+_JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.S)
 
 
 class FrameStreamError(ValueError):
@@ -79,6 +107,12 @@ class FrameStreamError(ValueError):
 
 class TruncatedRunWarning(UserWarning):
     """A run file ends inside a frame (e.g. a crash mid-write); its whole frames were read."""
+
+
+def _first_line(exc: BaseException) -> str:
+    """An exception's message on one line (its first), or its type's name."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 def _align(n: int) -> int:
@@ -101,23 +135,79 @@ def _encode_scalar(value: float):
 
 
 def _decode_scalar(value) -> float:
-    """Inverse of ``_encode_scalar``."""
+    """Inverse of ``_encode_scalar``: a JSON number, or "nan", "inf", "-inf"."""
+    if isinstance(value, str):
+        if value not in _DIAGNOSTIC_STRINGS:
+            raise ValueError(f"not a diagnostic value: {value!r}")
+        return float(value)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TypeError(f"not a diagnostic value: {value!r}")
     return float(value)
+
+
+def _json_depth(raw: bytes) -> int:
+    """Deepest nesting of arrays and objects in JSON text (brackets inside strings ignored)."""
+    bare = np.frombuffer(_JSON_STRING.sub(b"", raw), dtype=np.uint8)
+    if bare.size == 0:
+        return 0
+    step = ((bare == 0x5B) | (bare == 0x7B)).astype(np.int64) - ((bare == 0x5D) | (bare == 0x7D))
+    return int(np.cumsum(step).max(initial=0))
+
+
+def _reject_constant(name: str):
+    """json.loads hook: NaN and Infinity are not JSON (RFC 8259)."""
+    raise ValueError(f"{name} is not valid JSON")
+
+
+def _load_json(raw: bytes):
+    """Strict, bounded JSON: UTF-8, at most MAX_JSON_DEPTH deep, no NaN/Infinity literals.
+
+    Raises ValueError (with a short reason) for anything else.
+    """
+    depth = _json_depth(raw)
+    if depth > MAX_JSON_DEPTH:
+        raise ValueError(f"JSON nested {depth} deep, more than {MAX_JSON_DEPTH}")
+    try:
+        return json.loads(raw.decode("utf-8"), parse_constant=_reject_constant)
+    except RecursionError:  # not reachable under the depth limit; kept as a last guard
+        raise ValueError("JSON nested too deep") from None
+
+
+def _check_shape(shape, itemsize: int) -> tuple | None:
+    """``shape`` as a tuple if it is a valid array shape for the stream, else None.
+
+    Valid: a list of 1..MAX_NDIM non-negative integers whose non-zero entries, multiplied
+    together and by ``itemsize``, stay within MAX_ARRAY_EXTENT.
+    """
+    if not isinstance(shape, (list, tuple)) or not 1 <= len(shape) <= MAX_NDIM:
+        return None
+    extent = itemsize
+    for d in shape:
+        if type(d) is not int or d < 0:
+            return None
+        extent *= max(d, 1)
+        if extent > MAX_ARRAY_EXTENT:
+            return None
+    return tuple(shape)
 
 
 def _as_le_array(value, what: str, dtype=None) -> np.ndarray:
     """``value`` as a C-contiguous little-endian array of a carried dtype."""
     arr = np.asarray(value, dtype=dtype)
-    if arr.dtype.kind not in _DTYPE_KINDS:
-        raise TypeError(f"{what} has unsupported dtype {arr.dtype} "
-                        "(bool, integer, float and complex arrays are carried)")
     if arr.ndim == 0:
         raise ValueError(f"{what} must be an array with at least one dimension, got a scalar")
-    return np.ascontiguousarray(arr, dtype=arr.dtype.newbyteorder("<"))
+    le = arr.dtype.newbyteorder("<") if arr.dtype.kind in "biufc" else arr.dtype
+    if le.str not in DTYPES:
+        raise TypeError(f"{what} has unsupported dtype {arr.dtype} (carried: bool, 8- to 64-bit "
+                        "integers, float16/32/64, complex64/128)")
+    if _check_shape([int(d) for d in arr.shape], le.itemsize) is None:
+        raise ValueError(f"{what} has shape {arr.shape}: at most {MAX_NDIM} dimensions "
+                         f"and {MAX_ARRAY_EXTENT} bytes are carried")
+    return np.ascontiguousarray(arr, dtype=le)
 
 
 class FrameWriter:
-    """Append frames to a new run file (``.cps``).
+    """Append frames to a new run file (``.cps``), or to an existing one (``append``).
 
     ``header`` is a JSON-serialisable dict describing the run (scene name, dim, backend,
     parameters, container geometry, rigid body descriptions ...); NumPy scalars and arrays
@@ -127,6 +217,7 @@ class FrameWriter:
     end, which the reader drops with a ``TruncatedRunWarning``.
 
     An existing file at ``path`` is replaced. Use as a context manager, or call ``close()``.
+    ``header`` (attribute) is the header as a reader will see it (after the JSON round trip).
     """
 
     def __init__(self, path, header: dict):
@@ -141,6 +232,17 @@ class FrameWriter:
                               ensure_ascii=False, separators=(",", ":")).encode("utf-8")
         except (TypeError, ValueError) as exc:
             raise type(exc)(f"{self.path}: header is not JSON-serialisable: {exc}") from None
+        except RecursionError:
+            raise ValueError(f"{self.path}: header is nested too deep") from None
+        # what a reader accepts: bounded size and nesting
+        if len(body) > MAX_HEADER_JSON:
+            raise ValueError(f"{self.path}: header JSON is {len(body)} bytes, more than the "
+                             f"{MAX_HEADER_JSON} a reader accepts")
+        depth = _json_depth(body)
+        if depth > MAX_JSON_DEPTH:
+            raise ValueError(f"{self.path}: header is nested {depth} deep, more than the "
+                             f"{MAX_JSON_DEPTH} a reader accepts")
+        self.header = json.loads(body)
         # fixed part, JSON, zero padding to the first frame; the CRC covers all but itself
         first = _align(_FILE_HEAD.size + len(body))
         pad = _ZEROS[: first - _FILE_HEAD.size - len(body)]
@@ -151,6 +253,56 @@ class FrameWriter:
         self._end = 0
         self._count = 0
         self._write_all(b"".join((fixed, struct.pack("<I", crc), body, pad)))
+
+    @classmethod
+    def append(cls, path, *, keep: int | None = None) -> "FrameWriter":
+        """Open an existing run file to append frames to it (e.g. to resume a run).
+
+        Checks the file header and every frame (headers, tables and data checksums), cuts a
+        torn tail (a partial last frame left by a crash) back to the last whole frame, and
+        continues the frame indices from there. The header JSON is kept unchanged and is
+        ``.header``. ``keep``: keep only the first ``keep`` frames and cut the rest (e.g.
+        ``run.last_checkpoint().index + 1`` to resume from a checkpoint).
+
+        Raises ``FrameStreamError`` (one line) when the file is not a frame stream, or when
+        any frame before the torn tail (before ``keep``) is corrupted; the file is then
+        left as it was.
+        """
+        path = os.fspath(path)
+        # index and check the file with the reader; a torn tail is expected here, not warned
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", TruncatedRunWarning)
+            run = Run(path)
+        try:
+            if run.version != FORMAT_VERSION:
+                raise FrameStreamError(f"{path}: cannot append version-{FORMAT_VERSION} frames to "
+                                       f"a version-{run.version} file")
+            n = len(run)
+            if keep is not None:
+                keep = operator.index(keep)
+                if not 0 <= keep <= n:
+                    raise ValueError(f"{path}: keep must be in 0..{n} (the whole frames), got {keep}")
+                n = keep
+            # every kept frame must be whole and intact: headers, tables, data checksums
+            for i in range(n):
+                run._check_frame(i)
+            end = run._entries[n - 1].offset + run._entries[n - 1].frame_len if n else run._first
+            header = run.header
+        finally:
+            run.close()
+        # cut what follows the last kept frame, then continue after it
+        self = cls.__new__(cls)
+        self.path, self.header, self._count, self._end = path, header, n, end
+        self._file = builtins.open(path, "r+b", buffering=0)
+        try:
+            if os.fstat(self._file.fileno()).st_size != end:
+                os.ftruncate(self._file.fileno(), end)
+                os.fsync(self._file.fileno())
+            self._file.seek(end)
+        except BaseException:
+            self._file.close()
+            raise
+        return self
 
     @property
     def frames_written(self) -> int:
@@ -246,6 +398,9 @@ class FrameWriter:
         meta = json.dumps({"groups": counts, "fields": field_specs, "rigid": rigid_specs,
                            "diagnostics": diag}, allow_nan=False, ensure_ascii=False,
                           separators=(",", ":")).encode("utf-8")
+        if len(meta) > MAX_TABLE_JSON:
+            raise ValueError(f"{self.path}: the frame's table is {len(meta)} bytes of JSON, more than "
+                             f"the {MAX_TABLE_JSON} a reader accepts (too many fields or bodies)")
         data_start = _align(ALIGN + len(meta))
         frame_len = data_start + offset
 
@@ -321,6 +476,72 @@ class FrameWriter:
         self._end += len(data)
 
 
+def _array_problem(spec, what: str) -> str | None:
+    """Why an array description of a frame table is invalid, or None."""
+    if not isinstance(spec, dict):
+        return f"{what} is not an object"
+    dtype = spec.get("dtype")
+    if dtype not in DTYPES:
+        return f"{what} has dtype {dtype!r}, not one of {' '.join(DTYPES)}"
+    if _check_shape(spec.get("shape"), np.dtype(dtype).itemsize) is None:
+        return f"{what} has a bad shape"
+    offset = spec.get("offset")
+    if type(offset) is not int or offset < 0 or offset % ALIGN:
+        return f"{what} has a bad offset (not a non-negative multiple of {ALIGN})"
+    return None
+
+
+def _table_problem(meta) -> str | None:
+    """Why a decoded frame table is invalid (docs/frame_format.md, "Frame"), or None."""
+    if not isinstance(meta, dict):
+        return "not a JSON object"
+    groups, fields = meta.get("groups"), meta.get("fields")
+    rigid, diagnostics = meta.get("rigid"), meta.get("diagnostics")
+    if not (isinstance(groups, dict) and isinstance(fields, list) and isinstance(rigid, dict)
+            and isinstance(diagnostics, dict)):
+        return "needs the objects groups, rigid, diagnostics and the list fields"
+    # groups: name -> particle count
+    for name, count in groups.items():
+        if type(count) is not int or count < 0:
+            return f"group {name!r} has a bad count"
+    # fields: unique names, each in a listed group whose count is its length
+    seen = set()
+    for spec in fields:
+        name = spec.get("name") if isinstance(spec, dict) else None
+        if not isinstance(name, str) or not name or name in seen:
+            return "a field has a missing, empty or repeated name"
+        seen.add(name)
+        problem = _array_problem(spec, f"field {name!r}")
+        if problem:
+            return problem
+        group = spec.get("group")
+        if not isinstance(group, str) or group not in groups:
+            return f"field {name!r} is in a group that is not listed"
+        if spec["shape"][0] != groups[group]:
+            return f"field {name!r} has {spec['shape'][0]} rows but group {group!r} has {groups[group]}"
+    # rigid: body -> array name -> float64 array; a pose of the documented shapes
+    for body, arrays in rigid.items():
+        if not isinstance(arrays, dict):
+            return f"rigid body {body!r} is not an object"
+        for key, spec in arrays.items():
+            problem = _array_problem(spec, f"rigid body {body!r} {key!r}")
+            if problem:
+                return problem
+            if spec["dtype"] != "<f8":
+                return f"rigid body {body!r} {key!r} is not <f8"
+        if ([1, 2, 3] if "position" not in arrays else arrays["position"]["shape"]) not in ([2], [3]):
+            return f"rigid body {body!r} needs a position of shape (3,) or (2,)"
+        if ([0] if "orientation" not in arrays else arrays["orientation"]["shape"]) not in ([1], [4]):
+            return f"rigid body {body!r} needs an orientation of shape (4,) or (1,)"
+    # diagnostics: name -> number or "nan" / "inf" / "-inf"
+    for name, value in diagnostics.items():
+        try:
+            _decode_scalar(value)
+        except (TypeError, ValueError):
+            return f"diagnostic {name!r} is not a number"
+    return None
+
+
 class Frame:
     """One frame of a recorded run.
 
@@ -377,6 +598,11 @@ class Run:
     accessing a corrupted frame raises ``FrameStreamError`` naming it; ``verify()``
     checks every frame.
 
+    Attributes: ``path``, ``version``, ``header`` (the run description dict), ``steps``
+    (int64, -1 where a frame header is unreadable) and ``times`` (float64, NaN there), both
+    read-only arrays with one value per frame, ``kinds``, ``field_names``,
+    ``diagnostic_names`` and ``torn_bytes`` (bytes ignored after the last whole frame).
+
     Field arrays are views on the memory map: they stay valid after ``close()``, which
     then leaves unmapping to the garbage collector.
     """
@@ -387,11 +613,20 @@ class Run:
         self._entries: list[_Entry] = []
         self._meta: dict[int, dict] = {}
         self._verified: set[int] = set()
-        # map the whole file read-only; the descriptor is not needed afterwards
-        with builtins.open(self.path, "rb") as f:
-            if os.fstat(f.fileno()).st_size == 0:
+        # map the whole file read-only; the descriptor is not needed afterwards (non-blocking
+        # open: a FIFO or device is refused instead of waiting for a writer)
+        fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+        try:
+            st = os.fstat(fd)
+            if stat.S_ISDIR(st.st_mode):
+                raise FrameStreamError(f"{self.path}: is a directory, not a corpuscle frame stream")
+            if not stat.S_ISREG(st.st_mode):
+                raise FrameStreamError(f"{self.path}: not a regular file, not a corpuscle frame stream")
+            if st.st_size == 0:
                 raise FrameStreamError(f"{self.path}: empty file, not a corpuscle frame stream")
-            mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+            mm = mmap.mmap(fd, 0, access=mmap.ACCESS_READ)
+        finally:
+            os.close(fd)
         # header and frame index; unmap again if either is unreadable
         try:
             self.version, self.header, first = self._read_file_header(mm)
@@ -400,6 +635,9 @@ class Run:
             mm.close()
             raise
         self._mm = mm
+        self._first = first
+        # bytes after the last whole frame that are not a frame: a torn tail, ignored
+        self.torn_bytes = trailing
         # per-frame header values as read-only arrays
         self.steps = np.array([e.step for e in self._entries], dtype=np.int64)
         self.times = np.array([e.time for e in self._entries], dtype=np.float64)
@@ -431,18 +669,25 @@ class Run:
                                    f"reader supports ({FORMAT_VERSION}); upgrade corpuscle")
         if version < 1:
             raise FrameStreamError(f"{self.path}: unsupported format version {version}")
-        # the header JSON and its padding must be whole
+        # the header JSON and its padding must be whole, and of a size a reader accepts
         first = _align(_FILE_HEAD.size + json_len)
         if first > size:
-            raise FrameStreamError(f"{self.path}: file header is truncated ({size} bytes)")
-        # checksum over bytes 0..27 and 32..first, then the JSON itself
-        if zlib.crc32(mm[32:first], zlib.crc32(mm[:28])) != crc:
+            raise FrameStreamError(f"{self.path}: file header is truncated ({size} bytes, "
+                                   f"the header JSON alone claims {json_len})")
+        if json_len > MAX_HEADER_JSON:
+            raise FrameStreamError(f"{self.path}: file header is corrupted (header JSON of "
+                                   f"{json_len} bytes, more than the limit {MAX_HEADER_JSON})")
+        # checksum over bytes [0, 28) and [32, first): everything but the checksum itself
+        with memoryview(mm) as whole, whole[:28] as fixed, whole[32:first] as rest:
+            ok = zlib.crc32(rest, zlib.crc32(fixed)) == crc
+        if not ok:
             raise FrameStreamError(f"{self.path}: file header is corrupted (checksum mismatch)")
-        # the run description is a JSON object
+        # the run description is a JSON object, strict and bounded
         try:
-            header = json.loads(mm[32: 32 + json_len].decode("utf-8"))
-        except ValueError:
-            header = None
+            header = _load_json(mm[32: 32 + json_len])
+        except ValueError as exc:
+            raise FrameStreamError(f"{self.path}: file header is corrupted (bad JSON: "
+                                   f"{_first_line(exc)})") from None
         if not isinstance(header, dict):
             raise FrameStreamError(f"{self.path}: file header is corrupted (not a JSON object)")
         return version, header, first
@@ -460,8 +705,8 @@ class Run:
             return None
         (_, frame_len, index, step, time, dt, meta_len, kind, _, data_crc,
          head_crc) = _FRAME_HEAD.unpack_from(mm, off)
-        # the table inside the file, header and table matching head_crc
-        if off + ALIGN + meta_len > size:
+        # the table inside the file and of an accepted size, header and table matching head_crc
+        if off + ALIGN + meta_len > size or meta_len > MAX_TABLE_JSON:
             return None
         if zlib.crc32(mm[off + ALIGN: off + ALIGN + meta_len], zlib.crc32(mm[off: off + 60])) != head_crc:
             return None
@@ -475,6 +720,9 @@ class Run:
         """Index the frames from ``off``; return the number of trailing bytes of a cut frame."""
         size = len(mm)
         entries = self._entries
+        # bytes the forward searches may checksum in all: crafted candidates (a frame magic
+        # every 64 bytes, each claiming a long table) would otherwise cost size**2 / 128
+        budget = 2 * size
         while off < size:
             # the common case: the next frame's header is readable and in sequence
             found = self._frame_header(mm, off)
@@ -486,13 +734,20 @@ class Run:
                 off += entry.frame_len
                 continue
             # damaged header: resume at the next readable header later in the sequence
-            # (the frames skipped over must fit in the bytes skipped, 64 bytes at least each)
+            # (the frames skipped over must fit in the bytes skipped, 64 bytes at least each);
+            # index and length are checked before the checksum, which is paid from the budget
             pos = mm.find(FRAME_MAGIC, off)
             while pos != -1:
-                if pos % ALIGN == 0:
-                    found = self._frame_header(mm, pos)
-                    if found is not None and 0 <= found[1] - len(entries) <= (pos - off) // ALIGN:
-                        break
+                if pos % ALIGN == 0 and pos + ALIGN <= size:
+                    index, = struct.unpack_from("<Q", mm, pos + 16)
+                    if 0 <= index - len(entries) <= (pos - off) // ALIGN:
+                        budget -= 60 + min(struct.unpack_from("<I", mm, pos + 48)[0], size - pos)
+                        if budget < 0:
+                            pos = -1
+                            break
+                        found = self._frame_header(mm, pos)
+                        if found is not None:
+                            break
                 pos = mm.find(FRAME_MAGIC, pos + 1)
             if pos != -1:
                 # frames between are unreadable placeholders that raise on access
@@ -533,6 +788,17 @@ class Run:
     def kinds(self) -> list:
         """Kind of every frame ("frame" or "checkpoint"; None where the header is unreadable)."""
         return [e.kind for e in self._entries]
+
+    def last_checkpoint(self) -> Frame | None:
+        """The last frame whose kind is "checkpoint", or None if there is none.
+
+        Found from the frame headers; the checkpoint's payload is then read and checked
+        like any frame (a corrupted one raises ``FrameStreamError``).
+        """
+        for i in reversed(range(len(self))):
+            if self._entries[i].kind == "checkpoint":
+                return self._frame(i)
+        return None
 
     @property
     def field_names(self) -> list[str]:
@@ -601,24 +867,18 @@ class Run:
         return self._meta[i]
 
     def _parse_table(self, raw: bytes, i: int) -> dict:
-        """Decode a frame's JSON table and check its structure, so later code can trust it."""
-        # the four sections with the expected types
+        """Decode a frame's JSON table and check its structure, so later code can trust it.
+
+        Array descriptions get their dtype, shape and offset checked here (``_locate``
+        checks them against the frame's bytes); the result keeps the table's own keys.
+        """
         try:
-            meta = json.loads(raw.decode("utf-8"))
-            ok = (isinstance(meta, dict)
-                  and isinstance(meta["groups"], dict) and isinstance(meta["fields"], list)
-                  and isinstance(meta["rigid"], dict) and isinstance(meta["diagnostics"], dict)
-                  and all(isinstance(s, dict) and isinstance(s["name"], str)
-                          and isinstance(s["group"], str) for s in meta["fields"])
-                  and all(isinstance(body, dict) and all(isinstance(s, dict) for s in body.values())
-                          for body in meta["rigid"].values()))
-            # diagnostics must decode to floats
-            for value in meta["diagnostics"].values() if ok else ():
-                _decode_scalar(value)
-        except (ValueError, KeyError, TypeError):
-            ok = False
-        if not ok:
-            raise FrameStreamError(f"{self.path}: frame {i} is malformed (bad table)", frame=i)
+            meta = _load_json(raw)
+            reason = _table_problem(meta)
+        except ValueError as exc:
+            reason = f"bad JSON: {_first_line(exc)}"
+        if reason:
+            raise FrameStreamError(f"{self.path}: frame {i} is malformed (bad table: {reason})", frame=i)
         return meta
 
     def _check_frame(self, i: int) -> dict:
@@ -653,20 +913,14 @@ class Run:
         return specs
 
     def _locate(self, spec: dict, entry: _Entry, i: int) -> tuple[np.dtype, tuple, int]:
-        """(dtype, shape, absolute offset) of an array description, checked against the frame."""
-        # decode the description
-        try:
-            dtype = np.dtype(spec["dtype"])
-            shape = tuple(int(s) for s in spec["shape"])
-            rel = int(spec["offset"])
-        except (KeyError, TypeError, ValueError):
-            raise FrameStreamError(f"{self.path}: frame {i} is malformed (bad array entry)",
-                                   frame=i) from None
-        # a carried little-endian dtype, 64-byte aligned, inside the frame
+        """(dtype, shape, absolute offset) of a checked array description, inside the frame."""
+        dtype = np.dtype(spec["dtype"])
+        shape = tuple(spec["shape"])
+        rel = spec["offset"]
+        # a 64-byte aligned array whose bytes lie in the data region
         data_start = entry.offset + _align(ALIGN + entry.meta_len)
         nbytes = math.prod(shape) * dtype.itemsize
-        if (dtype.kind not in _DTYPE_KINDS or dtype.byteorder == ">" or min(shape, default=0) < 0
-                or rel % ALIGN or rel < 0 or data_start + rel + nbytes > entry.offset + entry.frame_len):
+        if data_start + rel + nbytes > entry.offset + entry.frame_len:
             raise FrameStreamError(f"{self.path}: frame {i} is malformed (array outside its frame)",
                                    frame=i)
         return dtype, shape, data_start + rel

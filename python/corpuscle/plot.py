@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._viz_common import check_file_output, open_run, require, scene_info, units_of
+from ._viz_common import AtomicOutputs, check_file_output, cli_warnings, open_run, os_reason, require, scene_name, units_of
 
 
 class PlotError(ValueError):
@@ -138,18 +138,27 @@ def plot_run(run, out=None, *, series: list[str] | str | None = None, width: flo
     for ax in axes.flat[:len(panels)]:
         ax.tick_params(labelbottom=True)
         ax.set_xlabel("time [s]")
-    name = scene_info(header)["name"]
+    name = scene_name(header)
     fig.suptitle(f"{name}: {len(run)} frames, t = {np.nanmin(t):.4g}..{np.nanmax(t):.4g} s".lstrip(": "))
     if out is not None:
-        try:
-            fig.savefig(out)
-        except OSError as exc:
-            raise PlotError(f"cannot write {out}: {exc.strerror or exc}") from None
+        # written under a temporary name and moved into place when complete
+        with AtomicOutputs() as files:
+            try:
+                fig.savefig(files.path(out), format=out.suffix.lower()[1:])
+                files.commit()
+            except OSError as exc:
+                files.discard()
+                raise PlotError(f"cannot write {out}: {os_reason(exc)}") from None
     return fig
 
 
 def run_command(args: argparse.Namespace) -> int:
     """Run ``corpuscle plot`` from parsed arguments; returns the exit code."""
+    with cli_warnings():
+        return _run_command(args)
+
+
+def _run_command(args: argparse.Namespace) -> int:
     try:
         dpi = int(args.dpi)
     except ValueError:

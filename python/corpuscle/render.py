@@ -31,7 +31,8 @@ import numpy as np
 
 from . import _camera, _colors, _overlay
 from ._video import VideoSink, open_sink, output_kind
-from ._viz_common import DIE_FACES, open_run, parse_frames, parse_index, parse_size, require, scene_info, units_of
+from ._viz_common import (DIE_FACES, os_reason, cli_warnings, open_run, parse_frames, parse_index, parse_size, require,
+                          scene_info, units_of)
 
 
 class RenderError(ValueError):
@@ -587,6 +588,14 @@ class FrameRenderer:
 # ---- outputs ------------------------------------------------------------------------------
 
 
+def _open_sink(out, size, fps) -> VideoSink:
+    """The output sink, or a one-line RenderError when it cannot be started (no ffmpeg ...)."""
+    try:
+        return open_sink(out, size, fps, RenderError)
+    except OSError as exc:
+        raise RenderError(f"cannot write {out}: {os_reason(exc)}") from None
+
+
 @dataclass
 class RenderResult:
     """What ``render_run`` wrote."""
@@ -605,7 +614,7 @@ class LiveRender:
 
     def __init__(self, out, header: dict, *, fps: float = 30.0, size=(1280, 720), **options):
         self.renderer = FrameRenderer(header, size=size, **options)
-        self.sink: VideoSink = open_sink(out, self.renderer.size, parse_fps(fps), RenderError)
+        self.sink: VideoSink = _open_sink(out, self.renderer.size, parse_fps(fps))
 
     def add_frame(self, frame) -> np.ndarray:
         """Render ``frame`` and append it to the output; returns the picture."""
@@ -613,21 +622,28 @@ class LiveRender:
         try:
             self.sink.add(img)
         except OSError as exc:
-            raise RenderError(f"cannot write {self.sink.path}: {exc.strerror or str(exc).splitlines()[0]}") from None
+            raise RenderError(f"cannot write {self.sink.path}: {os_reason(exc)}") from None
         return img
 
     def close(self) -> None:
-        """Finish the output file."""
+        """Finish the output and move it into place (it appears only now, complete)."""
         try:
             self.sink.close()
         except OSError as exc:
-            raise RenderError(f"cannot write {self.sink.path}: {exc.strerror or str(exc).splitlines()[0]}") from None
+            raise RenderError(f"cannot write {self.sink.path}: {os_reason(exc)}") from None
+
+    def abort(self) -> None:
+        """Give up on the output: nothing of it is left behind."""
+        self.sink.abort()
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
     @classmethod
     def from_args(cls, args: argparse.Namespace, header: dict) -> "LiveRender | None":
@@ -676,15 +692,19 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
         if frame is not None:
             raise RenderError("--frame picks the frame of a .png; use --frames a:b[:step] for videos and directories")
         indices = parse_frames(frames, count, RenderError)
-    # colour range from up to 12 frames spread over the selection (stable over the whole video)
-    picks = sorted({indices[int(round(k))] for k in np.linspace(0, len(indices) - 1, min(12, len(indices)))})
+    # colour range from up to 12 frames spread over the selection (stable over the whole video);
+    # a range given by the caller needs no samples
+    picks = [] if value_range is not None else sorted(
+        {indices[int(round(k))] for k in np.linspace(0, len(indices) - 1, min(12, len(indices)))})
     renderer = FrameRenderer(run.header, size=size, color=color, value_range=value_range, log=log, ramp=ramp,
                              camera=camera, ghosts=ghosts, cutaway=cutaway, overlay=overlay, colorbar=colorbar,
                              sample_frames=[run[i] for i in picks])
     start = time.perf_counter()
     from tqdm import tqdm
 
-    sink = open_sink(out, size, fps, RenderError)
+    # the output appears only when complete: any failure (a corrupted frame, a full disk, an
+    # encoder that died, Ctrl-C) removes what was written so far
+    sink = _open_sink(out, size, fps)
     try:
         with tqdm(total=len(indices), unit="frame", desc="render", disable=None if progress is None else not progress,
                   leave=False) as bar:
@@ -693,10 +713,11 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
                 bar.update(1)
         sink.close()
     except OSError as exc:
-        # a full disk or an encoder that died: one line naming the output
-        raise RenderError(f"cannot write {out}: {exc.strerror or str(exc).splitlines()[0]}") from None
-    finally:
-        sink.close()
+        sink.abort()
+        raise RenderError(f"cannot write {out}: {os_reason(exc)}") from None
+    except BaseException:
+        sink.abort()
+        raise
     return RenderResult(Path(os.fspath(out)), len(indices), size, time.perf_counter() - start, renderer.color_range)
 
 
@@ -705,6 +726,11 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
 
 def run_command(args: argparse.Namespace) -> int:
     """Run ``corpuscle render`` from parsed arguments; returns the exit code."""
+    with cli_warnings():
+        return _run_command(args)
+
+
+def _run_command(args: argparse.Namespace) -> int:
     res = render_run(args.run, args.output, frames=args.frames, frame=args.frame, size=args.size, fps=args.fps,
                      color=args.color, value_range=args.range, log=args.log, ramp=args.ramp, camera=args.camera,
                      ghosts=args.ghosts, cutaway=args.cutaway, overlay=not args.no_overlay, colorbar=not args.no_colorbar,
