@@ -56,10 +56,13 @@ def test_bench_json_rows(tmp_path, capsys):
     assert "OpenMP threads" in row["device"]
     # the table on stdout shows the same row
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].split()[:2] == ["backend", "particles"]
+    head = lines[0].split()
+    assert head[:2] == ["backend", "particles"]
     cpu = [ln.split() for ln in lines if ln.startswith("cpu")]
     assert len(cpu) == 1 and cpu[0][1] == "300"
-    assert float(cpu[0][2].replace(",", "")) == pytest.approx(row["steps_per_second"], rel=1e-3, abs=0.06)
+    at = head.index("steps/s")
+    assert float(cpu[0][at].replace(",", "")) == pytest.approx(row["steps_per_second"], rel=1e-3, abs=0.06)
+    assert float(cpu[0][head.index("init(s)")]) == pytest.approx(row["init_seconds"], abs=1e-3)
 
 
 def test_bench_into_a_closed_pipe_exits_141_quietly():

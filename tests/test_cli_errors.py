@@ -139,7 +139,7 @@ def test_usage_error_through_the_console_script_is_one_line():
     p = subprocess.run(["corpuscle", "run", "magic8ball", "--backend", "foo"], capture_output=True, text=True,
                        timeout=60)
     assert p.returncode == 2 and p.stdout == ""
-    assert p.stderr == ("corpuscle run: error: argument --backend: invalid choice: 'foo' (choose from 'auto', "
+    assert p.stderr == ("corpuscle: error: argument --backend: invalid choice: 'foo' (choose from 'auto', "
                         "'serial', 'cpu', 'cuda') (see `corpuscle run --help`)\n")
 
 

@@ -409,6 +409,9 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
         raise UsageError(f"--resume {src}: the header has no scene parameters")
     scene = Scene.from_dict(params, name=str(header.get("scene", "scene")))
     every = int(header.get("record_every") or scene["run.record_every"])
+    # the frames go on holding what the recorded ones hold
+    args.velocity = bool(args.velocity or header.get("velocity_recorded"))
+    args.ghosts = bool(args.ghosts or header.get("ghosts_recorded"))
     out = pathlib.Path(args.out) if args.out else src
     _check_out(out, None)
     if ckpt is None:
@@ -634,6 +637,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
                         frames += 1
                     except (KeyboardInterrupt, OSError):
                         pass
+            except BaseException:
+                # a failure (the disk, the core): the live render is dropped, not published
+                if live is not None:
+                    live.abort()
+                    live = None
+                raise
             finally:
                 wall = time.perf_counter() - t0
                 progress.close()
@@ -844,7 +853,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def _print_bench(rows: list[dict[str, Any]]) -> None:
     """The benchmark table, then the per-stage table of each backend that has one."""
     serial = next((r for r in rows if r["backend"] == "serial"), None)
-    head = f"{'backend':<8} {'particles':>10} {'init s':>8} {'steps/s':>12} {'particle-steps/s':>18}"
+    head = f"{'backend':<8} {'particles':>10} {'init(s)':>8} {'steps/s':>12} {'particle-steps/s':>18}"
     print(head + (f" {'speedup':>9}" if serial else ""))
     for r in rows:
         init = r.get("init_seconds")
@@ -890,7 +899,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse with usage errors on one line: the message and where to find the usage."""
 
     def error(self, message: str):  # noqa: D401 - argparse's hook
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
+        self.exit(EXIT_USAGE, f"{PROG}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -928,6 +937,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args._argv = argv
     try:
         return int(args._handler(args) or 0)
+    except KeyboardInterrupt:
+        # Ctrl-C outside a run's loop (which reports its own): no traceback
+        _err("interrupted")
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         # stdout was closed early (`corpuscle bench ... | head`): stop quietly, as Unix tools do
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -325,10 +325,11 @@ struct FinalizeStage {
     float dt = sums_dt(m, S, G.die);
     const bool last = C.time + double(dt) >= C.end_time;
     if (last) dt = float(C.end_time - C.time);
-    // faults found before integrating: the step is not taken, the state stays sound
+    // faults found before integrating: a non-finite state is not integrated (the state
+    // stays as it was); a runaway speed is integrated once more and then stops the run
     int fault = 0;
     if (!finite(S.vmax2) || !finite(S.amax2)) fault = kBadParticles;
-    else if (max_speed(S, G.die) > 100.0f * m.c0) fault = kBadSpeed;
+    const bool runaway = !fault && max_speed(S, G.die) > 100.0f * m.c0;
     // the die under the fluid's reaction, then kept inside the sphere
     RigidState d = G.die;
     if (!fault) {
@@ -354,6 +355,10 @@ struct FinalizeStage {
     C.time = last ? C.end_time : C.time + double(dt);  // land exactly on the end time
     C.done = last ? 1 : 0;                              // and stop there: later steps are no-ops
     C.step += 1;
+    if (runaway) {
+      C.bad = kBadSpeed;
+      C.bad_step = C.step;
+    }
   }
 };
 
