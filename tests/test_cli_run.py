@@ -64,7 +64,7 @@ class FakeSim:
         FakeSim.made.append(self)
 
     @classmethod
-    def from_scene(cls, scene, backend="auto"):
+    def from_scene(cls, scene, backend="auto", neighbors=None, device=0):
         if backend == "cuda" and not cls.cuda:
             raise BackendError("--backend cuda: no usable GPU (no driver)")
         return cls(scene, backend)

@@ -182,10 +182,11 @@ def _cpu_name() -> str:
     return platform.processor() or platform.machine() or "unknown CPU"
 
 
-def _device_name(backend: str, info: dict[str, Any] | None) -> str:
+def _device_name(backend: str, info: dict[str, Any] | None, device: int = 0) -> str:
     """A human-readable device for benchmark records."""
     if backend == "cuda" and info and info.get("gpus"):
-        gpu = info["gpus"][0]
+        gpus = info["gpus"]
+        gpu = gpus[device] if 0 <= device < len(gpus) else gpus[0]
         return f"{gpu.get('name', 'GPU')} (compute {gpu.get('compute_capability', '?')})"
     cpu = f"{_cpu_name()}, {os.cpu_count() or '?'} logical cores"
     if backend == "cpu" and info:
@@ -285,10 +286,19 @@ RUN_OPTIONS = {"particles": "fluid.particles", "seed": "run.seed", "time": "run.
 EXIT_WRITE = 4  # the output could not be written (disk full, file too large, I/O error)
 
 
+def _add_engine_options(p: argparse.ArgumentParser) -> None:
+    """--neighbors and --device: how the engine runs a scene (not part of the scene)."""
+    p.add_argument("--neighbors", metavar="INDEX",
+                   help="neighbour search: lists (cells on rebuilds, lists with a skin reused in between; the "
+                        "default), grid (the cells every step) or allpairs (every pair: O(N^2), a reference)")
+    p.add_argument("--device", metavar="N", default="0", help="CUDA device number (default: 0)")
+
+
 def _configure_run(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", metavar="SCENE|FILE.toml", nargs="?",
                    help="a built-in scene name (see `corpuscle scenes`) or a scene file (not with --resume)")
     p.add_argument("--backend", choices=("auto", *BACKENDS), default="auto", help="compute backend (default: auto)")
+    _add_engine_options(p)
     p.add_argument("--steps", metavar="N",
                    help="run exactly N steps (past run.end_time unless --time is also given; then whichever "
                         "comes first)")
@@ -358,6 +368,7 @@ def _run_prepare(args: argparse.Namespace) -> _RunPlan:
     args.time = _float_option("--time", args.time)
     args.every = _int_option("--every", args.every, minimum=1)
     ckpt = _int_option("--checkpoint-every", args.checkpoint_every, minimum=1)
+    args.device = _int_option("--device", args.device, minimum=0)
     if args.resume:
         if args.time is not None and not args.time > 0:
             raise UsageError(f"--time must be a positive number of seconds, got {args.time:g}")
@@ -572,9 +583,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     # initialisation (timed on its own, not part of steps/s)
     t_init = time.perf_counter()
     if plan.resume is None:
-        sim = simulation.Simulation.from_scene(scene, backend=args.backend)
+        sim = simulation.Simulation.from_scene(scene, backend=args.backend, neighbors=args.neighbors,
+                                               device=args.device)
     else:
-        sim = simulation.Simulation(scene, backend=args.backend, checkpoint=_checkpoint_state(plan.resume["state"]))
+        sim = simulation.Simulation(scene, backend=args.backend, checkpoint=_checkpoint_state(plan.resume["state"]),
+                                    neighbors=args.neighbors, device=args.device)
     sim.set_end_time(plan.end_time)  # the core shortens the last step to land on it
     start_steps = int(sim.steps)
     init_seconds = time.perf_counter() - t_init
@@ -766,6 +779,7 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
                    help="backends to time: serial, cpu, cuda (default: every usable one)")
     p.add_argument("--particles", metavar="N", help="number of fluid particles (sets fluid.particles)")
     p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override any scene key (repeatable)")
+    _add_engine_options(p)
     p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
     p.add_argument("--repeats", metavar="R", default="5", help="timed repeats; the median is reported (default: 5)")
     p.add_argument("--warmup", metavar="W", default="20", help="untimed warm-up steps (default: 20)")
@@ -774,10 +788,13 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
+    from . import __version__
+
     # options and scene first; the core only after
     steps = _int_option("--steps", args.steps, minimum=1)
     repeats = _int_option("--repeats", args.repeats, minimum=1)
     warmup = _int_option("--warmup", args.warmup, minimum=0)
+    args.device = _int_option("--device", args.device, minimum=0)
     args.particles = _int_option("--particles", args.particles)
     scene = load_scene(args.scene, _overrides(args, {"particles": "fluid.particles"}))
     if args.json:
@@ -804,7 +821,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             if bar is not None:
                 bar.set_description(backend)
             t_init = time.perf_counter()
-            sim = Simulation.from_scene(scene, backend=backend)
+            sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
             init_seconds = time.perf_counter() - t_init
             if warmup:
                 sim.step(warmup)
@@ -827,8 +844,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "steps_per_second": sps,
                 "particle_steps_per_second": sps * n,
                 "seconds": times,
-                "device": _device_name(backend, info),
+                "neighbors": getattr(sim, "neighbors", None),
+                "device": _device_name(backend, info, args.device),
                 "date": date,
+                "version": __version__,
                 "command": _command_line(args),
             }
             if backend == "cuda":
@@ -839,7 +858,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
 
-    _print_bench(rows)
+    # the file first: a closed stdout (| head) must not lose the measurements
     if args.json:
         try:
             with open(args.json, "w", encoding="utf-8") as f:
@@ -847,6 +866,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 f.write("\n")
         except OSError as exc:
             raise UsageError(f"cannot write {args.json}: {exc.strerror or _one_line(exc)}") from None
+    _print_bench(rows)
     return EXIT_OK
 
 
