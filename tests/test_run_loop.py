@@ -263,3 +263,19 @@ def test_no_room_for_the_fluid_is_one_clear_error():
     with pytest.raises(ValueError, match=r"die.contact_margin=0.16 h with sph.h=1 m .* leaves 0.0% of the container"):
         corpuscle.Simulation.from_scene("magic8ball", backend="cpu", particles=300,
                                         overrides={"sph.h": 1.0, "sph.scale_h": False})
+
+
+def test_a_shake_window_acts_from_the_step_that_starts_at_its_start_time():
+    # windows are compared with the double clock: one starting at 0.1 s (not a binary
+    # fraction) acts on the step that starts at exactly 0.1 s
+    window = [{"start": 0.1, "end": 0.2, "acceleration": [50.0, 0.0, 0.0], "torque": [0.0, 0.0, 0.0]}]
+    a = small(n=300, overrides={"shake": window})
+    b = small(n=300, overrides={"shake": []})
+    a.run(until=0.1)
+    b.run(until=0.1)
+    assert a.time == b.time == 0.1
+    assert np.array_equal(a.field("position", copy=True), b.field("position", copy=True))
+    b.set_control(acceleration=(50.0, 0.0, 0.0))
+    a.evaluate()
+    b.evaluate()
+    assert np.array_equal(a.field("acceleration", copy=True), b.field("acceleration", copy=True))

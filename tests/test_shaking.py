@@ -300,14 +300,12 @@ def test_rotating_frame_terms_on_the_die():
     assert np.linalg.norm(dt * 2 * np.cross(omega, V)) > 1e-4
 
 
-@pytest.mark.xfail(strict=True, reason="physics bug (reported): the die's rotation in the container frame omits "
-                                       "the frame's angular acceleration and rotation (rigid.h integrate_box)")
 def test_die_rotation_sees_the_spinning_frame():
     # A die with no torque on it keeps its angular velocity in the lab frame. Seen from the
     # container, which spins at omega with angular acceleration alpha, its relative angular
     # velocity w obeys dw/dt = tau/I - alpha - omega x w (isotropic inertia, container frame
-    # components): from w = 0 one step gives w' = -alpha dt. integrate_box applies only
-    # tau - w x I w - damping, so an isolated die turns with the container instead (w' = 0).
+    # components): from w = 0 one step gives w' = -alpha dt (a die that turned with the
+    # container instead, w' = 0, would fail).
     dt = 1e-3
     acc_c, torque_c = (0.0, 0.0, 0.0), (0.3, -0.2, 0.1)
     spun = spun_up(**{"timestep.dt_min": dt, "timestep.dt_max": dt})

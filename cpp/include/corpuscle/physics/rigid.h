@@ -91,11 +91,19 @@ CPS_HD CPS_INLINE void integrate_box(const RigidBox& b, const BodyParams& p, con
   Vec3 F = force + g_eff * b.mass - cross(f.omega, s.v) * (2.0f * b.mass) - s.v * (b.mass * p.linear_damping);
   s.v += F * (dt / b.mass);
   s.x += s.v * dt;
-  // Euler's equations in the body frame: I dw/dt = tau - w x (I w)
+  // rotation: w_body is the angular velocity relative to the container (body frame). Euler's
+  // equations hold for the absolute one, wa = w + Omega: I dwa/dt = tau - wa x (I wa); seen
+  // from the container, dw/dt = dwa/dt - alpha - Omega x w (the frame's Euler and transport
+  // terms). Damping acts on the rotation relative to the container (the fluid's drag)
   Vec3 w = s.w_body;
+  Vec3 Om = qrotate_inv(s.q, f.omega);
+  Vec3 al = qrotate_inv(s.q, f.alpha);
+  Vec3 wa = w + Om;
+  Vec3 Iwa{{b.inertia[0] * wa[0], b.inertia[1] * wa[1], b.inertia[2] * wa[2]}};
   Vec3 Iw{{b.inertia[0] * w[0], b.inertia[1] * w[1], b.inertia[2] * w[2]}};
-  Vec3 tb = qrotate_inv(s.q, torque) - cross(w, Iw) - Iw * p.angular_damping;
-  for (int k = 0; k < 3; ++k) w[k] += tb[k] / b.inertia[k] * dt;
+  Vec3 tb = qrotate_inv(s.q, torque) - cross(wa, Iwa) - Iw * p.angular_damping;
+  Vec3 transport = al + cross(Om, w);
+  for (int k = 0; k < 3; ++k) w[k] += (tb[k] / b.inertia[k] - transport[k]) * dt;
   s.w_body = w;
   s.q = qintegrate_body(s.q, w, dt);
 }

@@ -50,7 +50,7 @@ inline Model build_model(const ParamSource& p) {
   m.n_shakes = int(shakes.size());
   for (int s = 0; s < m.n_shakes; ++s) {
     const ParamSource& w = *shakes[s];
-    m.shakes[s] = ShakeWindow{w.f("start"), w.f("end"), w.vec3("acceleration"), w.vec3("torque")};
+    m.shakes[s] = ShakeWindow{w.number("start"), w.number("end"), w.vec3("acceleration"), w.vec3("torque")};
   }
   return m;
 }

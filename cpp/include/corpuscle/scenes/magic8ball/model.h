@@ -19,7 +19,7 @@ constexpr int kMaxShakes = 32;
 
 // a time window of container shaking: linear acceleration and torque on the shell
 struct ShakeWindow {
-  float start, end;
+  double start, end;  // s, compared with the double clock
   Vec3 acc;
   Vec3 torque;
 };
