@@ -18,7 +18,7 @@ if [ -d .baseline ]; then
   python3 -m pip install --no-build-isolation --no-deps --target /tmp/base .baseline > "$OUT/build_base.log" 2>&1 || tail -20 "$OUT/build_base.log"
 fi
 say gpu tests
-python3 -m pytest -q -m gpu tests 2>&1 | tee "$OUT/gpu_tests.log" | tail -15
+python3 -m pytest -q -m gpu $(grep -l "mark.gpu" tests/*.py) 2>&1 | tee "$OUT/gpu_tests.log" | tail -15
 base() { PYTHONPATH=/tmp/base python3 -m corpuscle.cli "$@"; }
 say bench default scene, old then new then old
 for who in base new base new; do
