@@ -48,7 +48,7 @@ say resume on cuda
 corpuscle run magic8ball --backend cuda --steps 600 --every 100 --checkpoint-every 200 --velocity --out /tmp/r1.cps --json > /dev/null
 cp /tmp/r1.cps /tmp/r2.cps
 python3 - <<'PY' | tee -a "$log"
-import corpuscle, numpy as np, subprocess, json
+import corpuscle, corpuscle.io, numpy as np, subprocess, json
 # cut r2 back to its checkpoint at step 200 (frame 2), resume, compare with r1
 w = corpuscle.io.FrameWriter.append("/tmp/r2.cps", keep=3); w.close()
 p = subprocess.run(["corpuscle", "run", "--resume", "/tmp/r2.cps", "--backend", "cuda", "--json"], capture_output=True, text=True)

@@ -3,8 +3,9 @@
 
 #include <unistd.h>
 
-#include <fstream>
-#include <sstream>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
 
 #include "corpuscle/core/error.h"
 #include "corpuscle/scenes/magic8ball/build.h"
@@ -49,16 +50,21 @@ double bytes_needed(const SimRequest& r) {
   return m8::bytes<CpuExec>(r);
 }
 
-// MemAvailable of /proc/meminfo (what can be allocated without swapping), else free pages
+// MemAvailable of /proc/meminfo (what can be allocated without swapping), else free pages.
+// C stdio, not iostreams: a Python process may have loaded another libstdc++ (PyTorch's
+// environment does), and number extraction from a stream crashed there
 static double bytes_available_host() {
-  std::ifstream f("/proc/meminfo");
-  std::string line;
-  while (std::getline(f, line)) {
-    if (line.rfind("MemAvailable:", 0) == 0) {
-      std::istringstream in(line.substr(13));
-      double kib = 0.0;
-      if (in >> kib) return kib * 1024.0;
+  if (FILE* f = std::fopen("/proc/meminfo", "r")) {
+    char line[256];
+    double kib = -1.0;
+    while (std::fgets(line, sizeof line, f)) {
+      if (std::strncmp(line, "MemAvailable:", 13) == 0) {
+        kib = std::strtod(line + 13, nullptr);
+        break;
+      }
     }
+    std::fclose(f);
+    if (kib >= 0.0) return kib * 1024.0;
   }
   long pages = sysconf(_SC_AVPHYS_PAGES), size = sysconf(_SC_PAGE_SIZE);
   return pages > 0 && size > 0 ? double(pages) * double(size) : 0.0;
