@@ -4,7 +4,7 @@ term, the floor and the renormalisation at the die), Tait pressure, acceleration
 Spiky pressure, viscosity Laplacian, gravity, die contact spring + drag), XSPH, the die's
 reaction, the step's reductions and the adaptive dt.
 
-The reference is written from the physics (DESIGN.md, the papers cited in sph.h), not from
+The reference is written from the physics (docs/architecture.md, the papers cited in sph.h), not from
 the core's code paths: all pairs instead of a cell grid, float64 instead of float32, and
 particles matched to the core's (cell-reordered) arrays through ``field("id")``.
 """

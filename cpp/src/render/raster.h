@@ -1,7 +1,7 @@
 // corpuscle renderer: per-pixel math shared by the CPU loops (raster.cpp) and any device path.
 //
 // Everything here is a small CPS_HD function over plain data, so a CUDA rasterizer can call
-// the same formulas the OpenMP one does (DESIGN.md: physics -- and pixels -- written once).
+// the same formulas the OpenMP one does (docs/architecture.md: physics -- and pixels -- written once).
 //
 // Conventions: images are row-major RGB8 (H, W, 3); pixel (row i, column j) has its centre at
 // (j + 0.5, i + 0.5) in screen coordinates, x to the right, y down. View space has x right,
