@@ -33,6 +33,7 @@ import warnings
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
+from ._frame_sink import FrameSink
 from .scene import SCHEMAS, KINDS, SceneError, builtin_scenes, load_scene, parse_set
 
 PROG = "corpuscle"
@@ -546,14 +547,14 @@ def _checkpoint_record(sim, rec: dict) -> None:
         groups[f"state.{name}"] = "state"
 
 
-def _record(writer, sim, args: argparse.Namespace, live, kind: str = "frame") -> None:
-    """Write one frame (a checkpoint carries the full state too), and render it when
-    `--render` asked for that."""
+def _record(sink, sim, args: argparse.Namespace, live, kind: str = "frame") -> None:
+    """Queue one frame for writing (a checkpoint carries the full state too), and render it
+    when `--render` asked for that."""
     rec = sim.frame(ghosts=args.ghosts or bool(getattr(args, "render_ghosts", False)), velocity=args.velocity)
     if kind == "checkpoint":
         _checkpoint_record(sim, rec)
     with _interrupts_deferred():
-        writer.write_frame(sim.steps, sim.time, sim.dt, **rec, kind=kind)
+        sink.put(sim.steps, sim.time, sim.dt, rec, kind)
     if live is not None:
         from types import SimpleNamespace
         live.add_frame(SimpleNamespace(**rec, time=sim.time, step=sim.steps))
@@ -613,10 +614,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         with writer:
+            sink = FrameSink(writer)  # frames are written while the next chunk steps
             try:
                 if plan.resume is None:
-                    _record(writer, sim, args, live, kind_at(start_steps, False))
-                    frames += 1
+                    _record(sink, sim, args, live, kind_at(start_steps, False))
                 # advance to each multiple of K steps, record, check health
                 while True:
                     now = int(sim.steps)
@@ -632,22 +633,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     if message:
                         stopped = _one_line(message)
                         if taken > 0:
-                            _record(writer, sim, args, live)  # the state where it stopped
-                            frames += 1
+                            _record(sink, sim, args, live)  # the state where it stopped
                         break
                     if taken == 0:
                         break  # nothing left to do (the end time was reached)
                     now = int(sim.steps)
                     final = ((plan.end_step is not None and now >= plan.end_step) or sim.time >= plan.end_time)
-                    _record(writer, sim, args, live, kind_at(now, final))
-                    frames += 1
+                    _record(sink, sim, args, live, kind_at(now, final))
                     last_recorded = now
             except KeyboardInterrupt:
                 interrupted = True
                 if int(sim.steps) > last_recorded:
                     try:
-                        _record(writer, sim, args, live)  # the whole step it stopped after
-                        frames += 1
+                        _record(sink, sim, args, live)  # the whole step it stopped after
                     except (KeyboardInterrupt, OSError):
                         pass
             except BaseException:
@@ -657,14 +655,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     live = None
                 raise
             finally:
-                wall = time.perf_counter() - t0
-                progress.close()
-                if live is not None:
-                    live.close()
+                try:
+                    sink.close()  # the queued frames are written (a write error is raised here)
+                finally:
+                    wall = time.perf_counter() - t0
+                    frames = sink.written
+                    last_recorded = sink.last_step if sink.last_step is not None else start_steps
+                    progress.close()
+                    if live is not None:
+                        live.close()
     except OSError as exc:
         # the writer cut the file back to its last whole frame
         write_error = f"cannot write {out}: {exc.strerror or _one_line(exc)}"
-        wall = time.perf_counter() - t0
     # the writer is closed here, so every recorded frame is readable
 
     steps = int(sim.steps) - start_steps

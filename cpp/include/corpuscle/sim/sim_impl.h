@@ -25,7 +25,7 @@ class SimImpl final : public Sim {
   template <class T> using Buf = typename Exec::template Buffer<T>;
   using Record = typename P::SceneRecord;
   using Control = typename P::ControlRecord;
-  static constexpr int kPollBatch = 16;  // steps between record snapshots on a device
+  static constexpr int kPollBatch = 32;  // steps between record snapshots on a device
 
   template <class Model>
   SimImpl(Exec ex, const Model& m, const Record& initial, int device)
