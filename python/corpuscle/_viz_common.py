@@ -21,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 # units of recorded per-particle fields and per-frame diagnostics (SI; 2-D forces per unit depth)
+# where the run header does not give them ("units", written by every kind since the header
+# described the kind)
 UNITS = {
     "position": "m",
     "velocity": "m/s",
@@ -44,17 +46,12 @@ UNITS = {
 
 
 def units_of(name: str, header: dict | None = None) -> str:
-    """Unit of a field or diagnostic; 2-D DEM "pressure" is a sum of contact forces (N/m)."""
-    if name == "pressure" and header and _is_dem(header):
-        return "N/m"
+    """Unit of a field or diagnostic: the run header's ``units`` (the kind's: a 2-D DEM
+    kind's "pressure", a sum of contact forces, is N/m), else the table above."""
+    units = header.get("units") if isinstance(header, dict) else None
+    if isinstance(units, dict) and isinstance(units.get(name), str):
+        return units[name]
     return UNITS.get(name, "")
-
-
-def _is_dem(header: dict) -> bool:
-    """True for soft-sphere (DEM) scenes, whose "pressure" is a contact-force sum."""
-    kind = header.get("kind") or _find_key(header.get("parameters") or header.get("scene") or {}, "kind")
-    text = f"{kind} {scene_name(header)}".lower()
-    return any(w in text for w in ("dem", "wind", "tunnel", "gas", "granular"))
 
 
 def is_run_like(obj: Any) -> bool:
@@ -335,10 +332,6 @@ def _vector3(value: Any) -> list[float] | None:
     return None
 
 
-# standard die: face number -> outward normal in the body frame (opposite faces sum to 7)
-DIE_FACES = {"1": [1, 0, 0], "6": [-1, 0, 0], "2": [0, 1, 0], "5": [0, -1, 0], "3": [0, 0, 1], "4": [0, 0, -1]}
-
-
 class HeaderError(ValueError):
     """A run header whose scene description (container, bodies, obstacles ...) is malformed."""
 
@@ -377,9 +370,19 @@ def _check_container(c: dict) -> dict:
 
 
 def _check_obstacle(ob: Any, k: int) -> dict:
+    """An obstacle: a polygon (``points``) or a box (``min``, ``max``; a 2-D box also gets
+    its four corners as ``points``, so it is drawn and exported as the polygon it is)."""
     if not isinstance(ob, dict):
         raise HeaderError(f"run header: obstacles[{k}] must be an object, got {_short(ob)}")
     out = dict(ob)
+    if ob.get("type") == "box":
+        lo, hi = _numbers(ob.get("min"), f"obstacles[{k}].min", 2, 3), _numbers(ob.get("max"), f"obstacles[{k}].max", 2, 3)
+        if len(lo) != len(hi) or any(a > b for a, b in zip(lo, hi)):
+            raise HeaderError(f"run header: obstacles[{k}] min must not exceed max (of the same length), "
+                              f"got {_short(lo)} and {_short(hi)}")
+        out["min"], out["max"] = lo, hi
+        if len(lo) == 2 and ob.get("points") is None:
+            out["points"] = [[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]
     if ob.get("points") is not None:
         pts = ob["points"]
         if not isinstance(pts, list):
@@ -434,27 +437,23 @@ def scene_info(header: dict | None) -> dict:
     """The scene geometry a run header describes, in the simulator's conventions.
 
     Returns ``{"name", "dim", "container", "obstacles", "bodies", "particle_radius",
-    "gravity"}`` (missing ones None or empty). Headers written by ``Simulation.header()``
-    carry these directly; a header holding only the scene's parameters (``"scene"`` or
-    ``"parameters"`` as the nested scene dict) gets a sphere container from
-    ``container.radius`` and a die box from ``die.side``.
+    "gravity", "up"}`` (missing ones None or empty), from the header's own keys as
+    ``Simulation.header()`` writes them for every kind (docs/frame_format.md, "Run
+    header"); nothing is guessed from the scene's parameters: a header without
+    ``container`` or ``bodies`` has none drawn. Gravity (for the up axis) is the header's
+    ``gravity``, else, for runs recorded before headers had it, the first 3-vector stored
+    under a ``gravity`` key anywhere in the header (the parameters' ``gravity.g``).
     """
     if not isinstance(header or {}, dict):
         raise HeaderError(f"run header must be a JSON object, got {type(header).__name__}")
     h = dict(header or {})
-    params = _params(h)
     name = scene_name(h)
     container = h.get("container") if isinstance(h.get("container"), dict) and "type" in h["container"] else None
-    if container is None and isinstance(params.get("container"), dict) and "radius" in params["container"]:
-        container = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": params["container"]["radius"]}
     if container is not None:
         container = _check_container(container)
     bodies = h.get("bodies") or []
     if not isinstance(bodies, list):
         raise HeaderError(f"run header: bodies must be a list, got {_short(bodies)}")
-    if not bodies and isinstance(params.get("die"), dict) and "side" in params["die"]:
-        half = 0.5 * _number(params["die"]["side"], "die.side", positive=True)
-        bodies = [{"name": "die", "shape": "box", "half_extents": [half] * 3, "faces": DIE_FACES}]
     obstacles = h.get("obstacles") or []
     if not isinstance(obstacles, list):
         raise HeaderError(f"run header: obstacles must be a list, got {_short(obstacles)}")
@@ -472,6 +471,6 @@ def scene_info(header: dict | None) -> dict:
         "obstacles": [_check_obstacle(ob, k) for k, ob in enumerate(obstacles)],
         "bodies": [_check_body(b, k) for k, b in enumerate(bodies)],
         "particle_radius": _number(radius, "particle_radius", positive=True) if radius else None,
-        "gravity": _vector3(_find_key(h, "gravity")),
+        "gravity": _vector3(h["gravity"]) if h.get("gravity") is not None else _vector3(_find_key(h, "gravity")),
         "up": up if isinstance(up, str) else None,
     }

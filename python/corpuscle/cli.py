@@ -33,8 +33,9 @@ import warnings
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
+from . import kinds as _kinds
 from ._frame_sink import FrameSink
-from .scene import SCHEMAS, KINDS, SceneError, builtin_scenes, load_scene, parse_set
+from .scene import SceneError, builtin_scenes, load_scene, parse_set
 
 PROG = "corpuscle"
 BACKENDS = ("serial", "cpu", "cuda")
@@ -120,6 +121,25 @@ def _overrides(args: argparse.Namespace, options: dict[str, str]) -> dict[str, o
         if value is not None:
             out[key] = value
     return out
+
+
+def _load_with_options(args: argparse.Namespace, options: dict[str, str]):
+    """The scene with ``--set`` and the dedicated options applied; ``--particles`` sets the
+    kind's particle key (an error for a kind without one)."""
+    ovr = _overrides(args, options)  # --set is parsed before the scene is read
+    scene = load_scene(args.scene)
+    if getattr(args, "particles", None) is not None:
+        kind = _kinds.find(scene.kind)
+        key = kind.particle_key if kind is not None else None
+        if key is None:
+            raise UsageError(f"--particles: scene kind {scene.kind!r} has no particle count (use --set)")
+        ovr[key] = args.particles
+    return scene.with_overrides(ovr)
+
+
+def _particles_help() -> str:
+    keys = ", ".join(f"{k.particle_key} for {name}" for name, k in _kinds.registry().items() if k.particle_key)
+    return f"number of particles (sets the scene kind's particle key: {keys or 'none'})"
 
 
 def _safe_filename(name: str) -> str:
@@ -213,8 +233,9 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
     if not args.keys:
         return EXIT_OK
     # the schema of every kind, for --set
-    for kind_name, keys in SCHEMAS.items():
-        kind = KINDS[kind_name]
+    for kind_name, registered in _kinds.registry().items():
+        kind = registered.schema
+        keys = kind.keys
         print(f"\nkind {kind_name}: {kind.description}")
         kw = max(len(k) for k in keys)
         for key, spec in keys.items():
@@ -283,7 +304,8 @@ register(Command("info", "show the version, build options and usable GPUs", _con
 # corpuscle run
 # ---------------------------------------------------------------------------
 
-RUN_OPTIONS = {"particles": "fluid.particles", "seed": "run.seed", "time": "run.end_time", "every": "run.record_every"}
+# dedicated options -> the run keys every kind has (--particles sets the kind's particle key)
+RUN_OPTIONS = {"seed": "run.seed", "time": "run.end_time", "every": "run.record_every"}
 EXIT_WRITE = 4  # the output could not be written (disk full, file too large, I/O error)
 
 
@@ -304,7 +326,7 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
                    help="run exactly N steps (past run.end_time unless --time is also given; then whichever "
                         "comes first)")
     p.add_argument("--time", metavar="T", help="simulated end time in seconds (sets run.end_time)")
-    p.add_argument("--particles", metavar="N", help="number of fluid particles (sets fluid.particles)")
+    p.add_argument("--particles", metavar="N", help=_particles_help())
     p.add_argument("--seed", metavar="S", help="random seed (sets run.seed)")
     p.add_argument(
         "--set", metavar="KEY=VALUE", action="append", default=[],
@@ -376,7 +398,7 @@ def _run_prepare(args: argparse.Namespace) -> _RunPlan:
         return _resume_prepare(args, steps, ckpt)
     if args.scene is None:
         raise UsageError("run needs a SCENE or FILE.toml (or --resume RUN.cps); see `corpuscle run --help`")
-    scene = load_scene(args.scene, _overrides(args, RUN_OPTIONS))
+    scene = _load_with_options(args, RUN_OPTIONS)
     every = int(scene["run.record_every"])
     out = pathlib.Path(args.out) if args.out else pathlib.Path(f"{_safe_filename(scene.name)}.cps")
     _check_out(out, scene)
@@ -528,18 +550,20 @@ def _interrupts_deferred():
 
 
 def _checkpoint_record(sim, rec: dict) -> None:
-    """Add the full state (Simulation.checkpoint) to a frame's fields: velocities and ids
-    of the fluid, and every scalar as a one-element array of the group ``state``."""
+    """Add the full state (Simulation.checkpoint) to a frame's fields: the checkpointed
+    particle fields (the 8-ball's positions, velocities and ids) in their groups, and every
+    scalar as a one-element array of the group ``state``."""
     import numpy as np
 
     state = sim.checkpoint()
     fields, groups = rec["fields"], rec["groups"]
-    for name in ("position", "velocity", "id"):
+    for name, group in sim.checkpoint_fields.items():
         fields[name] = np.asarray(state.pop(name))
-        groups[name] = "fluid"
+        groups[name] = group
+    float64 = set(sim.checkpoint_float64)
     for name, value in state.items():
         arr = np.asarray(value)
-        if arr.dtype.kind == "f" and name not in ("time", "spacing"):
+        if arr.dtype.kind == "f" and name not in float64:
             arr = arr.astype(np.float32)  # the core's float32 values, exactly
         elif arr.dtype.kind in "iu":
             arr = arr.astype(np.int64)
@@ -709,7 +733,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _checkpoint_state(fields: dict[str, Any]) -> dict[str, Any]:
-    """A checkpoint frame's fields as Simulation.restore takes them."""
+    """A checkpoint frame's fields as Simulation.restore takes them: the ``state.*`` scalars
+    and the particle fields (restore takes the checkpointed ones and names any missing)."""
     import numpy as np
 
     state: dict[str, Any] = {}
@@ -717,9 +742,9 @@ def _checkpoint_state(fields: dict[str, Any]) -> dict[str, Any]:
         if name.startswith("state."):
             value = np.asarray(arr)[0]
             state[name[len("state."):]] = value.tolist() if value.ndim else value.item()
-        elif name in ("position", "velocity", "id"):
+        else:
             state[name] = np.asarray(arr)
-    missing = [k for k in ("position", "velocity", "id", "time", "step") if k not in state]
+    missing = [k for k in ("time", "step") if k not in state]
     if missing:
         raise UsageError(f"--resume: the checkpoint lacks {', '.join(missing)}")
     return state
@@ -758,13 +783,13 @@ def _print_run_summary(s: dict[str, Any], scene) -> None:
     for key, value in rows:
         print(f"{key:<{width}}  {value}")
     result = s["result"] or {}
-    # the scene's answer, then anything else it reports
-    if "answer" in result:
-        face = result.get("answer_face")
-        print(f"8-ball says: {result['answer']}" + (f" (face {face})" if face is not None else ""))
-    for key, value in result.items():
-        if key not in ("answer", "answer_face"):
-            print(f"{key:<{width}}  {value}")
+    # the kind's lines for its result (the 8-ball's answer), then anything else it reports
+    kind = _kinds.find(scene.kind)
+    lines, rest = kind.summary(result) if kind is not None else ([], dict(result))
+    for line in lines:
+        print(line)
+    for key, value in rest.items():
+        print(f"{key:<{width}}  {value}")
 
 
 register(Command("run", "run a scene and record it to a frame stream", _configure_run, _cmd_run))
@@ -779,7 +804,7 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", metavar="SCENE|FILE.toml", help="a built-in scene name or a scene file")
     p.add_argument("--backend", nargs="+", choices=BACKENDS, metavar="B",
                    help="backends to time: serial, cpu, cuda (default: every usable one)")
-    p.add_argument("--particles", metavar="N", help="number of fluid particles (sets fluid.particles)")
+    p.add_argument("--particles", metavar="N", help=_particles_help())
     p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override any scene key (repeatable)")
     _add_engine_options(p)
     p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
@@ -798,7 +823,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     warmup = _int_option("--warmup", args.warmup, minimum=0)
     args.device = _int_option("--device", args.device, minimum=0)
     args.particles = _int_option("--particles", args.particles)
-    scene = load_scene(args.scene, _overrides(args, {"particles": "fluid.particles"}))
+    scene = _load_with_options(args, {})
     if args.json:
         parent = pathlib.Path(args.json).parent
         if not parent.is_dir():

@@ -167,7 +167,13 @@ def _body_part(name: str, spec: dict, state: dict, dim: int) -> Part:
 
 
 def _obstacle_part(ob: dict, k: int) -> Part | None:
-    """A fixed obstacle polygon (2-D scenes) as one polygon cell."""
+    """A fixed obstacle: a polygon as one polygon cell, a 3-D box as its 6 faces."""
+    if ob.get("type") == "box" and len(ob.get("min", ())) == 3:
+        lo, hi = np.asarray(ob["min"], float), np.asarray(ob["max"], float)
+        part = _body_part(f"obstacle_{ob.get('name', k)}", {"shape": "box", "half_extents": 0.5 * (hi - lo)},
+                          {"position": 0.5 * (lo + hi)}, 3)
+        part.cell_data = {}
+        return part
     pts = ob.get("points")
     if pts is None or len(pts) < 3:
         return None

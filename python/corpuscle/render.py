@@ -31,7 +31,7 @@ import numpy as np
 
 from . import _camera, _colors, _overlay
 from ._video import VideoSink, open_sink, output_kind
-from ._viz_common import (DIE_FACES, os_reason, cli_warnings, open_run, parse_frames, parse_index, parse_size, require,
+from ._viz_common import (os_reason, cli_warnings, open_run, parse_frames, parse_index, parse_size, require,
                           scene_info, units_of)
 
 
@@ -322,6 +322,8 @@ class FrameRenderer:
         for ob in self.scene.obstacles:
             if ob.get("points"):
                 pts.append(np.asarray(ob["points"], float)[:, :d])
+            elif ob.get("type") == "box" and len(ob.get("min", ())) >= d:
+                pts.append(np.array([ob["min"], ob["max"]], float)[:, :d])
         allp = np.concatenate([p for p in pts if len(p)]) if any(len(p) for p in pts) else np.zeros((1, d))
         lo, hi = np.nanmin(allp, axis=0), np.nanmax(allp, axis=0)
         pad = 0.02 * float(np.max(hi - lo) or 1.0)
@@ -481,14 +483,19 @@ class FrameRenderer:
             if shape != "box" or "half_extents" not in spec:
                 continue
             he = np.asarray(spec["half_extents"], float)[:3]
-            faces = spec.get("faces") or (DIE_FACES if "die" in name.lower() else {})
+            faces = spec.get("faces") or {}  # numbered faces only where the header gives them
             self._box_triangles(pos, rot, he, faces, tris, cols)
+        # fixed box obstacles (3-D), unrotated
+        for ob in self.scene.obstacles:
+            if ob.get("type") == "box" and len(ob.get("min", ())) == 3:
+                lo, hi = np.asarray(ob["min"], float), np.asarray(ob["max"], float)
+                self._box_triangles(0.5 * (lo + hi), np.eye(3), 0.5 * (hi - lo), {}, tris, cols, OBSTACLE_FILL)
         if tris:
             v = self.camera.project(np.concatenate(tris).reshape(-1, 3))[:, :3].reshape(-1, 9)
             self._raster.triangles(img, depth, np.ascontiguousarray(v, np.float32),
                                    np.ascontiguousarray(np.array(cols, np.uint8)), self.camera.ortho, True)
 
-    def _box_triangles(self, pos, rot, he, faces, tris, cols) -> None:
+    def _box_triangles(self, pos, rot, he, faces, tris, cols, rgb=DIE_RGB) -> None:
         """Lit faces of a box and the pips of its numbered faces that face the camera."""
         for a in range(3):
             for s in (-1.0, 1.0):
@@ -504,7 +511,7 @@ class FrameRenderer:
                 quad = [n_b * he + sb * eb + sc * ec for sb, sc in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
                 qw = [pos + rot @ q for q in quad]
                 k = self._shade(n_w)
-                col = tuple(int(min(255, ch * k)) for ch in DIE_RGB)
+                col = tuple(int(min(255, ch * k)) for ch in rgb)
                 tris += [np.array([qw[0], qw[1], qw[2]]), np.array([qw[0], qw[2], qw[3]])]
                 cols += [col, col]
         for label, normal in faces.items():

@@ -2,17 +2,21 @@
 
 A scene file has a ``[scene]`` table whose ``kind`` selects the schema, then one
 table per group of keys (``[fluid]``, ``[die]``, ...) and, for kinds that have them,
-arrays of tables such as ``[[shake]]``. Every key of a kind is declared once in
-:data:`SCHEMAS` with its type, default, unit, valid range and a one-line doc; a
-missing key takes its default, anything else is an error. Errors are
-:class:`SceneError` with a one-line message naming the key and the bad value.
+arrays of tables such as ``[[shake]]``. Every key of a kind is declared once, with its
+type, default, unit, valid range and a one-line doc, by the kind's module in
+``corpuscle/kinds/`` (see :mod:`corpuscle.kinds`); this module is the generic loader and
+validator, and :data:`KINDS` / :data:`SCHEMAS` are filled from that registry. A missing
+key takes its default, anything else is an error. Errors are :class:`SceneError` with a
+one-line message naming the key and the bad value.
 
 Built-in scenes ship in ``corpuscle/scenes/*.toml``::
 
     scene = load_scene("magic8ball", {"fluid.particles": 20000})
     scene["sph.h"], scene.shakes, scene.to_dict()
 
-New kinds are added with :func:`register_kind`.
+A new kind is a module in ``corpuscle/kinds/`` (which registers its schema here through
+:func:`register_kind`); a schema alone, without a simulation, can be registered with
+:func:`register_kind` directly (tests do).
 """
 
 from __future__ import annotations
@@ -37,15 +41,20 @@ __all__ = [
     "SCHEMAS",
     "KINDS",
     "register_kind",
+    "check_value",
+    "check_le",
+    "check_windows",
     "builtin_scenes",
     "load_scene",
     "parse_set",
     "Scene",
 ]
 
-VALUE_TYPES = ("float", "int", "bool", "str", "vec3", "list[str]")
+VALUE_TYPES = ("float", "int", "bool", "str", "enum", "vec2", "vec3", "points", "path", "list[str]")
 INT64_MAX = 2**63 - 1
 INT32_MAX = 2**31 - 1
+# the fixed-length vector types and their lengths
+_VECTORS = {"vec2": 2, "vec3": 3}
 
 
 class SceneError(ValueError):
@@ -60,10 +69,22 @@ class SceneError(ValueError):
 class KeySpec:
     """Declaration of one scene key.
 
-    ``type`` is one of ``float``, ``int``, ``bool``, ``str``, ``vec3``,
-    ``list[str]``. ``lo``/``hi`` are bounds (inclusive unless ``lo_open`` /
-    ``hi_open``; ``None`` for unbounded); for ``vec3`` they bound each component.
-    ``length`` fixes the length of a ``list[str]``; ``choices`` restricts a ``str``.
+    ``type`` is one of:
+
+    - ``float``, ``int``, ``bool``: a number (bounded by ``lo``/``hi``) or true/false;
+    - ``str``: any string (``choices``, if given, restricts it as for ``enum``);
+    - ``enum``: one of the strings in ``choices`` (required);
+    - ``vec2``, ``vec3``: exactly 2 or 3 finite numbers, each within ``lo``/``hi``;
+    - ``points``: a list of points, each 2 or 3 finite numbers within ``lo``/``hi``
+      (``dim`` fixes 2 or 3; without it either, but every point the same),
+      ``min_length``/``max_length`` bound how many;
+    - ``path``: a file path; a relative one is taken relative to the scene file's folder
+      (the current folder for scenes not read from a file, and for overrides); the file
+      must exist; the value is stored as the absolute path;
+    - ``list[str]``: a list of non-empty strings (``length`` fixes how many).
+
+    ``lo``/``hi`` are bounds (inclusive unless ``lo_open`` / ``hi_open``; ``None`` for
+    unbounded).
     """
 
     type: str
@@ -76,11 +97,24 @@ class KeySpec:
     hi_open: bool = False
     length: int | None = None
     choices: tuple[str, ...] | None = None
+    dim: int | None = None
+    min_length: int | None = None
+    max_length: int | None = None
 
     def __post_init__(self) -> None:
         # a schema typo should fail at import, not at the first bad scene
         if self.type not in VALUE_TYPES:
             raise TypeError(f"KeySpec type must be one of {VALUE_TYPES}, got {self.type!r}")
+        if self.type == "enum" and not self.choices:
+            raise TypeError("KeySpec of type enum needs choices")
+        if self.choices is not None and (isinstance(self.choices, str)
+                                         or not all(isinstance(c, str) for c in self.choices)):
+            raise TypeError(f"KeySpec choices must be a tuple of strings, got {self.choices!r}")
+        if self.dim not in (None, 2, 3):
+            raise TypeError(f"KeySpec dim must be 2 or 3, got {self.dim!r}")
+        lo, hi = self.min_length, self.max_length
+        if (lo is not None and lo < 0) or (lo is not None and hi is not None and hi < lo):
+            raise TypeError(f"KeySpec min_length/max_length must satisfy 0 <= min <= max, got {lo}, {hi}")
 
     def interval(self) -> str:
         """The valid range as text, e.g. ``(0, 1e6]``; empty when unbounded."""
@@ -92,6 +126,17 @@ class KeySpec:
         hi = "inf" if self.hi is None else _fmt_bound(self.hi)
         return f"{left}{lo}, {hi}{right}"
 
+    def count_text(self) -> str:
+        """How many points a ``points`` value holds, e.g. ``3 to 1000``; empty when any."""
+        lo, hi = self.min_length, self.max_length
+        if lo is not None and hi is not None:
+            return f"exactly {lo}" if lo == hi else f"{lo} to {hi}"
+        if lo is not None:
+            return f"at least {lo}"
+        if hi is not None:
+            return f"at most {hi}"
+        return ""
+
     def describe(self) -> str:
         """What a valid value looks like, for error messages."""
         rng = self.interval()
@@ -102,13 +147,21 @@ class KeySpec:
             return f"an integer in {rng}{unit}" if rng else f"an integer{unit}"
         if self.type == "bool":
             return "true or false"
-        if self.type == "str":
+        if self.type in ("str", "enum"):
             if self.choices:
                 return "one of " + ", ".join(json.dumps(c) for c in self.choices)
             return "a string"
-        if self.type == "vec3":
+        if self.type in _VECTORS:
             each = f" each in {rng}" if rng else ""
-            return f"a list of 3 finite numbers{each}{unit}"
+            return f"a list of {_VECTORS[self.type]} finite numbers{each}{unit}"
+        if self.type == "points":
+            count = self.count_text()
+            numbers = f"{self.dim}" if self.dim else "2 or 3"
+            each = f" in {rng}" if rng else ""
+            return (f"a list of {count + ' ' if count else ''}points, each {numbers} finite numbers{each}{unit}"
+                    + ("" if self.dim else " (all the same)"))
+        if self.type == "path":
+            return "the path of an existing file"
         n = f"exactly {self.length} " if self.length is not None else ""
         return f"a list of {n}non-empty strings"
 
@@ -129,9 +182,9 @@ class SceneKind:
     required_in_arrays: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
 
-# kind name -> dotted key -> spec (the public view of KINDS)
+# kind name -> dotted key -> spec (the public view of KINDS); filled by corpuscle.kinds
 SCHEMAS: dict[str, dict[str, KeySpec]] = {}
-# kind name -> full kind description
+# kind name -> full kind description; filled by corpuscle.kinds
 KINDS: dict[str, SceneKind] = {}
 
 # keys of the [scene] table; kind is fixed by the file, name/description may be set
@@ -228,9 +281,61 @@ def _in_range(x: float, spec: KeySpec) -> bool:
     return True
 
 
-def check_value(key: str, spec: KeySpec, value: Any) -> Any:
+def _as_list(value: Any) -> Any:
+    """A NumPy array as a list (other values unchanged)."""
+    if hasattr(value, "tolist") and not isinstance(value, (list, tuple, str)):
+        return value.tolist()
+    return value
+
+
+def _check_points(key: str, spec: KeySpec, value: Any) -> list[list[float]]:
+    """A ``points`` value: the list, then each point; errors name the point."""
+    value = _as_list(value)
+    what = spec.describe()
+    if not isinstance(value, (list, tuple)):
+        raise SceneError(f"{key} must be {what}, got {_fmt_value(value)}")
+    n = len(value)
+    if (spec.min_length is not None and n < spec.min_length) or (spec.max_length is not None and n > spec.max_length):
+        raise SceneError(f"{key} must be {what}, got {n} point{'' if n == 1 else 's'}")
+    out: list[list[float]] = []
+    for i, p in enumerate(value):
+        p = _as_list(p)
+        dims = (spec.dim,) if spec.dim else (len(out[0]),) if out else (2, 3)
+        ok = isinstance(p, (list, tuple)) and len(p) in dims
+        ok = ok and all(_is_number(x) and math.isfinite(x) and _in_range(x, spec) for x in p)
+        if not ok:
+            rng = spec.interval()
+            numbers = " or ".join(str(d) for d in dims)
+            each = f" each in {rng}" if rng else ""
+            same = " (as the first point)" if not spec.dim and out else ""
+            raise SceneError(f"{key}[{i}] must be {numbers} finite numbers{each}{same}, got {_fmt_value(p)}")
+        out.append([float(x) for x in p])
+    return out
+
+
+def _check_path(key: str, value: Any, base: str | os.PathLike | None) -> str:
+    """A ``path`` value: resolved against ``base`` (the scene file's folder) when relative,
+    the file must exist; returns the absolute path."""
+    if not isinstance(value, (str, os.PathLike)) or not os.fspath(value).strip():
+        raise SceneError(f"{key} must be the path of an existing file, got {_fmt_value(value)}")
+    text = os.fspath(value)
+    path = pathlib.Path(os.path.expanduser(text))
+    if not path.is_absolute():
+        path = pathlib.Path(base if base is not None else os.getcwd()) / path
+    path = pathlib.Path(os.path.abspath(path))
+    if path.is_dir():
+        raise SceneError(f"{key} must be the path of an existing file, got {_fmt_value(text)} ({path} is a folder)")
+    if not path.is_file():
+        raise SceneError(f"{key} must be the path of an existing file, got {_fmt_value(text)} "
+                         f"({path} does not exist)")
+    return str(path)
+
+
+def check_value(key: str, spec: KeySpec, value: Any, base: str | os.PathLike | None = None) -> Any:
     """Validate ``value`` for ``key`` and return it normalised (ints -> floats
-    for float keys, tuples -> lists); raise SceneError naming key and value."""
+    for float keys, tuples -> lists, paths absolute); raise SceneError naming key and
+    value. ``base`` is the folder relative paths are resolved against (default: the
+    current folder)."""
 
     def bad() -> SceneError:
         return SceneError(f"{key} must be {spec.describe()}, got {_fmt_value(value)}")
@@ -249,20 +354,27 @@ def check_value(key: str, spec: KeySpec, value: Any) -> Any:
         if not _is_bool(value):
             raise bad()
         return bool(value)
-    if t == "str":
-        if not isinstance(value, str) or (spec.choices and value not in spec.choices):
+    if t in ("str", "enum"):
+        if not isinstance(value, str):
             raise bad()
+        if spec.choices and value not in spec.choices:
+            hint = _suggest(value, spec.choices)
+            extra = f" (did you mean {json.dumps(hint)}?)" if hint else ""
+            raise SceneError(f"{key} must be {spec.describe()}, got {_fmt_value(value)}{extra}")
         return value
-    # vectors: exactly 3 finite numbers, each within the bounds
-    if t == "vec3":
-        if hasattr(value, "tolist") and not isinstance(value, (list, tuple)):
-            value = value.tolist()  # a NumPy array of three numbers
-        if not isinstance(value, (list, tuple)) or len(value) != 3:
+    # vectors: exactly 2 or 3 finite numbers, each within the bounds
+    if t in _VECTORS:
+        value = _as_list(value)  # a NumPy array of numbers
+        if not isinstance(value, (list, tuple)) or len(value) != _VECTORS[t]:
             raise bad()
         for x in value:
             if not _is_number(x) or not math.isfinite(x) or not _in_range(x, spec):
                 raise bad()
         return [float(x) for x in value]
+    if t == "points":
+        return _check_points(key, spec, value)
+    if t == "path":
+        return _check_path(key, value, base)
     # list of non-empty strings, optionally of a fixed length
     if not isinstance(value, (list, tuple)):
         raise bad()
@@ -315,23 +427,25 @@ def _unknown_table(dotted: str, kind: SceneKind) -> SceneError:
     return SceneError(f"unknown table {dotted!r} (valid tables: {', '.join(tables)})")
 
 
-def _walk(doc: Mapping[str, Any], prefix: str, kind: SceneKind, tables: set[str], out: dict[str, Any]) -> None:
+def _walk(doc: Mapping[str, Any], prefix: str, kind: SceneKind, tables: set[str], out: dict[str, Any],
+          base: str | os.PathLike | None = None) -> None:
     """Flatten the key tables of ``doc`` into dotted keys, rejecting unknown ones."""
     for name, value in doc.items():
         dotted = f"{prefix}{name}"
         if dotted in kind.keys:
-            out[dotted] = check_value(dotted, kind.keys[dotted], value)
+            out[dotted] = check_value(dotted, kind.keys[dotted], value, base)
         elif dotted in tables:
             if not isinstance(value, Mapping):
                 raise SceneError(f"{dotted} must be a table, got {_fmt_value(value)}")
-            _walk(value, dotted + ".", kind, tables, out)
+            _walk(value, dotted + ".", kind, tables, out, base)
         elif isinstance(value, Mapping):
             raise _unknown_table(dotted, kind)
         else:
             raise _unknown_key(dotted, kind)
 
 
-def _check_array(name: str, entries: Any, kind: SceneKind) -> list[dict[str, Any]]:
+def _check_array(name: str, entries: Any, kind: SceneKind,
+                 base: str | os.PathLike | None = None) -> list[dict[str, Any]]:
     """Validate an array of tables (``[[shake]]``); entries are numbered from 1."""
     specs = kind.arrays[name]
     required = kind.required_in_arrays.get(name, ())
@@ -348,7 +462,7 @@ def _check_array(name: str, entries: Any, kind: SceneKind) -> list[dict[str, Any
                 hint = _suggest(key, specs)
                 extra = f"did you mean '{where}.{hint}'?" if hint else f"{name} keys: {', '.join(specs)}"
                 raise SceneError(f"unknown key '{where}.{key}' ({extra})")
-            item[key] = check_value(f"{where}.{key}", specs[key], value)
+            item[key] = check_value(f"{where}.{key}", specs[key], value, base)
         for key in required:
             if key not in item:
                 raise SceneError(f"{where}.{key} is missing ({where} must set {', '.join(required)})")
@@ -357,8 +471,10 @@ def _check_array(name: str, entries: Any, kind: SceneKind) -> list[dict[str, Any
     return out
 
 
-def _validate(doc: Mapping[str, Any], kind: SceneKind) -> tuple[dict[str, Any], dict[str, list[dict[str, Any]]]]:
-    """Check a parsed document (without its [scene] table) against ``kind``."""
+def _validate(doc: Mapping[str, Any], kind: SceneKind,
+              base: str | os.PathLike | None = None) -> tuple[dict[str, Any], dict[str, list[dict[str, Any]]]]:
+    """Check a parsed document (without its [scene] table) against ``kind``; relative
+    paths are resolved against ``base``."""
     tables = _tables_of(kind.keys)
     values: dict[str, Any] = {}
     arrays: dict[str, list[dict[str, Any]]] = {name: [] for name in kind.arrays}
@@ -366,10 +482,10 @@ def _validate(doc: Mapping[str, Any], kind: SceneKind) -> tuple[dict[str, Any], 
     rest = {}
     for name, value in doc.items():
         if name in kind.arrays:
-            arrays[name] = _check_array(name, value, kind)
+            arrays[name] = _check_array(name, value, kind, base)
         else:
             rest[name] = value
-    _walk(rest, "", kind, tables, values)
+    _walk(rest, "", kind, tables, values, base)
     # defaults for everything not set, in schema order
     full = {k: values[k] if k in values else copy.deepcopy(s.default) for k, s in kind.keys.items()}
     for check in kind.checks:
@@ -406,6 +522,16 @@ def _scene_table(doc: Mapping[str, Any], fallback_name: str) -> tuple[SceneKind,
     return KINDS[kind_name], name, description
 
 
+def _override_path(spec: KeySpec | None, value: Any) -> Any:
+    """An override of a ``path`` key: a relative path is taken from the current folder
+    (the command line's), not from the scene file's."""
+    if spec is not None and spec.type == "path" and isinstance(value, str) and value.strip():
+        expanded = os.path.expanduser(value)
+        if not os.path.isabs(expanded):
+            return os.path.abspath(expanded)
+    return value
+
+
 # ---------------------------------------------------------------------------
 # the Scene object
 # ---------------------------------------------------------------------------
@@ -437,7 +563,8 @@ class Scene:
         kind, self.name, self.description = _scene_table(self._doc, fallback_name)
         self.kind = kind.name
         body = {k: v for k, v in self._doc.items() if k != "scene"}
-        self.values, self.arrays = _validate(body, kind)
+        base = pathlib.Path(os.fspath(path)).parent if path is not None else None
+        self.values, self.arrays = _validate(body, kind, base)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], name: str = "scene") -> "Scene":
@@ -492,7 +619,8 @@ class Scene:
 
         Keys are dotted (``fluid.particles``); an array name (``shake``) replaces the
         whole array; ``scene.name`` and ``scene.description`` may be set, ``scene.kind``
-        may not.
+        may not. A relative path given here is relative to the current folder (a path
+        written in the scene file is relative to the file's folder).
         """
         if not overrides:
             return self
@@ -511,6 +639,10 @@ class Scene:
                 continue
             # whole arrays of tables
             if key in kind.arrays:
+                specs = kind.arrays[key]
+                if isinstance(value, (list, tuple)):
+                    value = [{k: _override_path(specs.get(k), v) for k, v in e.items()} if isinstance(e, Mapping)
+                             else e for e in value]
                 doc[key] = value
                 continue
             if key not in kind.keys:
@@ -521,7 +653,7 @@ class Scene:
                 if not isinstance(node.get(t), dict):
                     node[t] = {}
                 node = node[t]
-            node[leaf] = value
+            node[leaf] = _override_path(kind.keys[key], value)
         scene = Scene(doc, path=self.path, builtin=self.builtin, fallback_name=self.name)
         return scene
 
@@ -668,104 +800,8 @@ def check_windows(array: str) -> CrossCheck:
 
 
 # ---------------------------------------------------------------------------
-# kind: magic8ball (seed 001) — key names are read by the core, keep them
+# the kinds: every kind's schema comes from its module in corpuscle/kinds/, registered here
+# when the registry is imported (the names above are all defined by now)
 # ---------------------------------------------------------------------------
 
-DEFAULT_ANSWERS = [
-    "It is certain",
-    "Ask again later",
-    "Outlook good",
-    "Don't count on it",
-    "Signs point to yes",
-    "Very doubtful",
-]
-
-_K = KeySpec
-MAGIC8BALL_KEYS: dict[str, KeySpec] = {
-    # run control
-    "run.end_time": _K("float", 5.0, "s", 0.0, 1e6, "simulated time at which the run ends", lo_open=True),
-    "run.seed": _K("int", 1, "", 0, INT64_MAX, "random seed for the Poisson-disk start"),
-    "run.record_every": _K("int", 100, "steps", 1, 10**9, "record a frame every this many steps"),
-    # spherical container
-    "container.radius": _K("float", 0.15, "m", 0.0, 100.0, "radius of the spherical container", lo_open=True),
-    "container.restitution": _K("float", 0.3, "", 0.0, 1.0, "fraction of normal wall velocity kept on contact"),
-    "container.friction": _K("float", 0.1, "", 0.0, 1.0, "fraction of tangential wall velocity removed on contact"),
-    "container.shell_inertia": _K(
-        "float", 0.02, "kg·m²", 0.0, 1e6, "moment of inertia of the ball shell that a shake torque acts on", lo_open=True
-    ),
-    "container.spin_damping": _K("float", 2.0, "1/s", 0.0, 1e4, "decay rate of the shell's spin"),
-    # fluid
-    "fluid.particles": _K("int", 3500, "", 200, 2_000_000, "number of fluid particles"),
-    "fluid.rest_density": _K("float", 1000.0, "kg/m³", 0.0, 1e5, "rest density of the fluid", lo_open=True),
-    "fluid.stiffness": _K("float", 12000.0, "Pa", 0.0, 1e10, "Tait equation-of-state stiffness B", lo_open=True),
-    "fluid.gamma": _K("float", 7.0, "", 1.0, 10.0, "Tait equation-of-state exponent"),
-    "fluid.viscosity": _K("float", 10.0, "Pa·s", 0.0, 1e5, "dynamic viscosity (viscosity-kernel Laplacian)"),
-    "fluid.xsph": _K("float", 0.1, "", 0.0, 1.0, "XSPH velocity smoothing factor"),
-    "fluid.density_floor": _K(
-        "float", 0.01, "", 0.0, 1.0, "lowest density allowed, as a fraction of rest density", lo_open=True
-    ),
-    # smoothing length
-    "sph.h": _K("float", 0.05, "m", 0.0, 10.0, "SPH smoothing length (kernel support radius)", lo_open=True),
-    "sph.scale_h": _K("bool", True, "", doc="scale h with particle count so neighbour counts stay fixed"),
-    "sph.reference_particles": _K("int", 3500, "", 1, INT32_MAX, "particle count at which sph.h applies"),
-    "sph.skin": _K("float", 0.2, "h", 0.0, 1.0,
-                   "neighbour-list skin: lists reach h (1 + skin) and are reused until a particle moved too far; 0 rebuilds every step"),
-    # gravity
-    "gravity.g": _K("vec3", [0.0, 0.0, -9.81], "m/s²", -1e4, 1e4, "gravitational acceleration"),
-    # rigid cube die
-    "die.side": _K("float", 0.064, "m", 0.0, 10.0, "edge length of the cube die", lo_open=True),
-    "die.density": _K(
-        "float", 1000.0, "kg/m³", 0.0, 1e5, "die density (equal to fluid.rest_density = neutrally buoyant)", lo_open=True
-    ),
-    "die.contact_stiffness": _K(
-        "float", 2.0e4, "1/s²", 0.0, 1e9, "spring acceleration per metre of penetration into the contact margin"
-    ),
-    "die.contact_margin": _K("float", 0.16, "h", 0.0, 5.0, "contact margin around the die, in units of h", lo_open=True),
-    "die.drag": _K("float", 20.0, "1/s", 0.0, 1e6, "relative-velocity drag rate on particles in the margin"),
-    "die.restitution": _K("float", 0.3, "", 0.0, 1.0, "fraction of normal velocity kept when the die hits the wall"),
-    "die.linear_damping": _K("float", 0.0, "1/s", 0.0, 1e4, "linear velocity damping rate of the die"),
-    "die.angular_damping": _K("float", 0.0, "1/s", 0.0, 1e4, "angular velocity damping rate of the die"),
-    "die.position": _K("vec3", [0.0, 0.0, 0.0], "m", None, None, "initial centre of the die (inside the container)"),
-    "die.answers": _K("list[str]", list(DEFAULT_ANSWERS), "", doc="answers printed on faces 1..6", length=6),
-    # adaptive time step
-    "timestep.dt_min": _K("float", 2e-5, "s", 0.0, 1.0, "smallest time step", lo_open=True),
-    "timestep.dt_max": _K("float", 1.5e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),
-    "timestep.cfl_advective": _K("float", 0.4, "", 0.0, 1.0, "advective CFL number (h / max speed)", lo_open=True),
-    "timestep.cfl_acoustic": _K("float", 0.4, "", 0.0, 1.0, "acoustic CFL number (h / sound speed)", lo_open=True),
-    "timestep.cfl_force": _K("float", 0.25, "", 0.0, 1.0, "force limit factor (sqrt(h / max acceleration))", lo_open=True),
-    "timestep.cfl_viscous": _K("float", 0.125, "", 0.0, 1.0, "viscous limit factor (h² rho / mu)", lo_open=True),
-}
-del _K
-
-SHAKE_KEYS: dict[str, KeySpec] = {
-    "start": KeySpec("float", 0.0, "s", 0.0, 1e6, "time the shake starts (required)"),
-    "end": KeySpec("float", 0.0, "s", 0.0, 1e6, "time the shake ends (required)", lo_open=True),
-    "acceleration": KeySpec("vec3", [0.0, 0.0, 0.0], "m/s²", -1e4, 1e4, "container linear acceleration"),
-    "torque": KeySpec("vec3", [0.0, 0.0, 0.0], "N·m", -1e6, 1e6, "torque applied to the container shell"),
-}
-
-
-def _die_inside_container(values: dict[str, Any], arrays: dict[str, list[dict[str, Any]]]) -> None:
-    """The die's bounding sphere must lie inside the container."""
-    p = values["die.position"]
-    side = values["die.side"]
-    radius = values["container.radius"]
-    reach = math.sqrt(sum(x * x for x in p)) + side * math.sqrt(3.0) / 2.0
-    if not reach < radius:
-        raise SceneError(
-            f"die.position must keep the die inside the container (|position| + die.side*sqrt(3)/2 < "
-            f"container.radius), got die.position = {_fmt_value(p)}, die.side = {_fmt_value(side)}, "
-            f"container.radius = {_fmt_value(radius)}"
-        )
-
-
-register_kind(
-    SceneKind(
-        name="magic8ball",
-        description="3-D SPH fluid in a sphere with a rigid cube die (seed 001)",
-        keys=MAGIC8BALL_KEYS,
-        arrays={"shake": SHAKE_KEYS},
-        required_in_arrays={"shake": ("start", "end")},
-        checks=[check_le("timestep.dt_min", "timestep.dt_max"), check_windows("shake"), _die_inside_container],
-    )
-)
+from . import kinds as _kinds  # noqa: E402,F401  (imports every kind, which registers its schema)
