@@ -347,6 +347,19 @@ def test_nonfinite_positions_are_nobodys_neighbours_and_break_nothing(backend, i
     assert_same_neighbours(res, pos, radius, exact=backend != "cuda")
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("index", INDEXES)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_indexes_over_no_particle_and_one_particle(backend, index, dim):
+    lo, hi = [0.0] * dim, [1.0] * dim
+    empty = T.gather(backend, index, np.zeros((0, dim), np.float32), 0.1, lo=lo, hi=hi, list_radius=0.2)
+    assert empty["offsets"].tolist() == [0] and len(empty["neighbors"]) == 0
+    assert T.pairs(backend, index, np.zeros((0, dim), np.float32), 0.1, lo=lo, hi=hi, list_radius=0.2).shape == (0, 2)
+    one = T.gather(backend, index, np.full((1, dim), 0.5, np.float32), 0.1, lo=lo, hi=hi, list_radius=0.2)
+    assert one["offsets"].tolist() == [0, 1] and one["neighbors"].tolist() == [0]  # itself
+    assert T.pairs(backend, index, np.full((1, dim), 0.5, np.float32), 0.1, lo=lo, hi=hi, list_radius=0.2).shape == (0, 2)
+
+
 # --------------------------------------------------------------------------------------
 # tags: layers and batched scenes
 # --------------------------------------------------------------------------------------
