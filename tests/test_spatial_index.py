@@ -249,17 +249,17 @@ def test_cell_grid_with_radius_beyond_the_domain_has_one_cell_per_axis():
 
 
 def test_cell_grid_refuses_more_cells_than_the_limit():
-    with pytest.raises(RuntimeError, match=r"3000 x 1000 x 1000 cells.*more than the limit"):
+    with pytest.raises(ValueError, match=r"3000 x 1000 x 1000 cells.*more than the limit"):
         T.cell_grid_spec(3, [0, 0, 0], [30, 10, 10], 0.01)
-    with pytest.raises(RuntimeError, match="more than the limit of 1000"):
+    with pytest.raises(ValueError, match="more than the limit of 1000"):
         T.cell_grid_spec(2, [0, 0], [1, 1], 0.01, max_cells=1000)
-    with pytest.raises(RuntimeError, match="for 4 tags"):
+    with pytest.raises(ValueError, match="for 4 tags"):
         T.cell_grid_spec(2, [0, 0], [1, 1], 0.01, ntags=4, max_cells=30000)
-    with pytest.raises(RuntimeError, match="radius must be positive"):
+    with pytest.raises(ValueError, match="radius must be positive"):
         T.cell_grid_spec(3, [0, 0, 0], [1, 1, 1], 0.0)
-    with pytest.raises(RuntimeError, match="upper corner"):
+    with pytest.raises(ValueError, match="upper corner"):
         T.cell_grid_spec(3, [0, 0, 0], [1, -1, 1], 0.1)
-    with pytest.raises(RuntimeError, match="more than a 64-bit key holds"):
+    with pytest.raises(ValueError, match="more than a 64-bit key holds"):
         T.cell_grid_spec(3, [0, 0, 0], [3e6, 1, 1], 1.0)  # 3e6 cells along x: 22 bits per axis
 
 
@@ -430,7 +430,7 @@ def test_csr_lists_grow_when_particles_crowd_and_keep_their_buffer_after(backend
 def test_csr_list_radius_beyond_the_grid_radius_is_refused():
     pos, lo, hi, radius = uniform_box(3, n=50)
     # the CSR kinds build the grid for the list radius; a query radius above it is refused
-    with pytest.raises(RuntimeError, match="exceeds the list radius"):
+    with pytest.raises(ValueError, match="exceeds the list radius"):
         T.gather("cpu", "csr_grid", pos, radius * 2, lo=lo, hi=hi, list_radius=radius)
 
 
@@ -470,5 +470,5 @@ def test_cuda_backend_on_a_named_device_and_a_missing_one():
     pos, lo, hi, radius = uniform_box(3, n=300)
     res = T.gather("cuda:0", "grid", pos, radius, lo=lo, hi=hi)
     assert_same_neighbours(res, pos, radius, exact=False)
-    with pytest.raises(RuntimeError, match="does not exist"):
+    with pytest.raises(ValueError, match="does not exist"):
         T.gather("cuda:999", "grid", pos, radius, lo=lo, hi=hi)

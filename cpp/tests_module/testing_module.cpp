@@ -158,6 +158,15 @@ nb::dict spec_dict(const std::vector<float>& lo, const std::vector<float>& hi, f
 
 NB_MODULE(_testing, m) {
   m.doc() = "corpuscle engine internals for the tests: exec primitives and spatial indexes on each backend";
+  // cps::Error (bad arguments, a grid past its cell limit, a missing device) is a ValueError,
+  // as in corpuscle._core (whose translator would otherwise apply once _core is loaded)
+  nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const cps::Error& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    }
+  });
 
   m.def("cuda_available", []() {
     std::string why;
