@@ -3,9 +3,14 @@
 // Reductions use a fixed chunking (kReduceChunks chunks combined in order), so serial and
 // OpenMP runs produce bit-identical results; the sort is a stable sort by key, so its
 // order matches CUB's stable radix sort on the device.
+//
+// The engine primitives (scan, stream compaction, segmented reduce, 64-bit sort, tiles,
+// flag-guarded loops) follow the same rule: their results do not depend on the thread
+// count, so serial and OpenMP runs are bitwise identical.
 #pragma once
 #include <algorithm>
 #include <chrono>
+#include <cstddef>
 #include <cstring>
 #include <numeric>
 #include <string>
@@ -18,6 +23,45 @@
 #include "corpuscle/core/lanes.h"
 
 namespace cps {
+
+// A tile on the CPU: the kTile lanes of a CUDA block, emulated by one thread. A tile
+// functor is written in phases: code outside `lanes` runs once per tile here and on every
+// thread of the block on CUDA, so it must be uniform (the same for all lanes: loop bounds,
+// shared pointers, no per-lane writes); `lanes(g)` runs g(lane) for every lane (here one
+// after another, on CUDA each thread its own); `sync()` separates phases (a no-op here,
+// since a phase ends when its `lanes` call returns; __syncthreads on CUDA). A lane's values
+// that outlive a phase live in a PerLane<T> (an array here, one register on CUDA), indexed
+// by the lane. Shared memory comes from `shared<T>(count)` (the same pointer for every lane,
+// uninitialised, at most the bytes given to for_each_tile in all).
+template <int kTile>
+struct CpuTile {
+  static constexpr int kSize = kTile;
+  template <class T>
+  struct PerLane {
+    T v[kTile];
+    CPS_HD T& operator[](int lane) { return v[lane]; }
+    CPS_HD const T& operator[](int lane) const { return v[lane]; }
+  };
+
+  CPS_HD static constexpr int size() { return kTile; }
+  CPS_HD void sync() const {}
+  template <class G>
+  CPS_HD void lanes(G&& g) const {
+    for (int l = 0; l < kTile; ++l) g(l);
+  }
+  // `count` Ts of the tile's shared memory (aligned for T); nullptr past the bytes reserved
+  template <class T>
+  CPS_HD T* shared(size_t count) {
+    size_t at = (used_ + alignof(T) - 1) / alignof(T) * alignof(T);
+    if (at + count * sizeof(T) > bytes_) return nullptr;
+    used_ = at + count * sizeof(T);
+    return reinterpret_cast<T*>(base_ + at);
+  }
+
+  unsigned char* base_ = nullptr;
+  size_t bytes_ = 0;
+  size_t used_ = 0;
+};
 
 struct CpuExec {
   bool parallel = true;
@@ -113,6 +157,128 @@ struct CpuExec {
   void reduce_then(const T* in, int n, T* out, Op op, T init, const F& f) const {
     reduce(in, n, out, op, init);
     f(0);
+  }
+
+  // ---- engine primitives (pointers are host memory; names match CudaExec's) ----
+
+  // allocate b for n elements (zero-filled)
+  template <class T>
+  void resize(Buffer<T>& b, size_t n) const { b.resize(n); }
+
+  // out[i] = in[0] + ... + in[i-1] (out[0] = 0), summed in U (e.g. int counts into int64
+  // offsets); *total = the sum of all n (total may be out + n for CSR offsets, or null).
+  // in and out must not overlap. Integer sums: the same on every backend.
+  template <class T, class U>
+  void exclusive_scan(const T* in, U* out, int n, U* total = nullptr) const {
+    U part[kReduceChunks + 1];
+    const int chunk = (n + kReduceChunks - 1) / kReduceChunks;
+    for_each(kReduceChunks, [&](int c) {
+      U acc = U(0);
+      const int b = c * chunk, e = std::min(n, b + chunk);
+      for (int i = b; i < e; ++i) acc = U(acc + U(in[i]));
+      part[c + 1] = acc;
+    });
+    part[0] = U(0);
+    for (int c = 0; c < kReduceChunks; ++c) part[c + 1] = U(part[c] + part[c + 1]);
+    for_each(kReduceChunks, [&](int c) {
+      U acc = part[c];
+      const int b = c * chunk, e = std::min(n, b + chunk);
+      for (int i = b; i < e; ++i) {
+        const U v = U(in[i]);
+        out[i] = acc;
+        acc = U(acc + v);
+      }
+    });
+    if (total) *total = part[kReduceChunks];
+  }
+
+  // stream compaction: the indices i with flags[i] != 0, ascending, into out_indices[0, *out_count)
+  void select_flagged(const int* flags, int n, int* out_indices, int* out_count) const {
+    int part[kReduceChunks + 1];
+    const int chunk = (n + kReduceChunks - 1) / kReduceChunks;
+    for_each(kReduceChunks, [&](int c) {
+      int cnt = 0;
+      const int b = c * chunk, e = std::min(n, b + chunk);
+      for (int i = b; i < e; ++i) cnt += flags[i] != 0;
+      part[c + 1] = cnt;
+    });
+    part[0] = 0;
+    for (int c = 0; c < kReduceChunks; ++c) part[c + 1] += part[c];
+    for_each(kReduceChunks, [&](int c) {
+      int at = part[c];
+      const int b = c * chunk, e = std::min(n, b + chunk);
+      for (int i = b; i < e; ++i)
+        if (flags[i] != 0) out_indices[at++] = i;
+    });
+    *out_count = part[kReduceChunks];
+  }
+
+  // out[s] = op(...op(op(init, items[offsets[s]]), items[offsets[s] + 1])..., items[offsets[s+1] - 1])
+  // for s in [0, nsegments): left to right within a segment (an empty one gives init), so
+  // the result does not depend on the thread count. offsets: int or int64, nsegments + 1 entries.
+  template <class T, class O, class Op>
+  void segmented_reduce(const T* items, const O* offsets, int nsegments, T* out, Op op, T init) const {
+    for_each(nsegments, [&](int s) {
+      T acc = init;
+      for (O k = offsets[s]; k < offsets[s + 1]; ++k) acc = op(acc, items[k]);
+      out[s] = acc;
+    });
+  }
+
+  // stable sort of (64-bit key, value) pairs by the low `bits` bits of the key (CUB's radix
+  // sort looks at those bits only, and so does this)
+  void sort_pairs(const uint64_t* kin, uint64_t* kout, const int* vin, int* vout, int n, int bits) {
+    if (n <= 0) return;
+    const uint64_t mask = bits >= 64 ? ~uint64_t(0) : ((uint64_t(1) << bits) - 1u);
+    order_.resize(n);
+    std::iota(order_.begin(), order_.end(), 0);
+    auto less = [kin, mask](int a, int b) { return (kin[a] & mask) < (kin[b] & mask); };
+#ifdef CPS_WITH_OPENMP
+    if (parallel && n > 50000)
+      __gnu_parallel::stable_sort(order_.begin(), order_.end(), less);
+    else
+#endif
+      std::stable_sort(order_.begin(), order_.end(), less);
+    for_each(n, [&](int j) {
+      kout[j] = kin[order_[j]];
+      vout[j] = vin[order_[j]];
+    });
+  }
+
+  // f(tile, CpuTile<kTile>&) for tile in [0, ntiles): CUDA runs a block of kTile threads per
+  // tile; here one thread runs a tile's lanes phase by phase (see CpuTile), tiles spread over
+  // the OpenMP threads, each with its own shared_bytes of scratch
+  template <int kTile, class F>
+  void for_each_tile(int ntiles, const F& f, size_t shared_bytes = 0) const {
+    if (ntiles <= 0) return;
+    const size_t words = (shared_bytes + sizeof(std::max_align_t) - 1) / sizeof(std::max_align_t);
+    auto run = [&](int begin, int end, int step) {
+      std::vector<std::max_align_t> scratch(words);
+      for (int t = begin; t < end; t += step) {
+        CpuTile<kTile> tile;
+        tile.base_ = reinterpret_cast<unsigned char*>(scratch.data());
+        tile.bytes_ = shared_bytes;
+        f(t, tile);
+      }
+    };
+#ifdef CPS_WITH_OPENMP
+    if (parallel && ntiles > 1) {
+#pragma omp parallel
+      {
+        // static round-robin: which thread runs a tile changes nothing in the results
+        run(omp_get_thread_num(), ntiles, omp_get_num_threads());
+      }
+      return;
+    }
+#endif
+    run(0, ntiles, 1);
+  }
+
+  // for_each(n, f) when *flag != 0 (flag: a value a previous stage wrote; on CUDA it is
+  // read on the device, with no host round trip)
+  template <class F>
+  void for_each_if(const int* flag, int n, const F& f) const {
+    if (*flag != 0) for_each(n, f);
   }
 
   void zero(void* p, size_t bytes) const { std::memset(p, 0, bytes); }

@@ -1,10 +1,16 @@
 // The CUDA backend: one-thread-per-item kernels over the shared functors, CUB for sort and
 // reduce, a stream per simulation, CUDA graphs for steady-state steps, CUDA events for timing.
+//
+// An exec belongs to one device (CudaExec(device), or the current device when constructed
+// without one): every call makes that device current before it launches or allocates.
 #pragma once
 #include <cuda_runtime.h>
+#include <thrust/iterator/counting_iterator.h>
 
+#include <cstddef>
 #include <cub/cub.cuh>
 #include <cstring>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -110,6 +116,76 @@ __global__ void __launch_bounds__(kThreads) k_block_sort_then(const uint32_t* ki
   for (int j = int(threadIdx.x); j < n; j += kThreads) f(j);
 }
 
+// ---- engine primitives' kernels ----
+
+// a tile on CUDA: one block of kTile threads (see CpuTile in cpu/exec_cpu.h for the phase
+// rules a tile functor follows on both backends)
+template <int kTile>
+struct CudaTile {
+  static constexpr int kSize = kTile;
+  template <class T>
+  struct PerLane {
+    T v;
+    CPS_HD T& operator[](int) { return v; }
+    CPS_HD const T& operator[](int) const { return v; }
+  };
+
+  CPS_HD static constexpr int size() { return kTile; }
+  CPS_HD void sync() const {
+#ifdef __CUDA_ARCH__
+    __syncthreads();
+#endif
+  }
+  template <class G>
+  CPS_HD void lanes(G&& g) const {
+#ifdef __CUDA_ARCH__
+    g(int(threadIdx.x));
+#endif
+  }
+  // `count` Ts of the block's dynamic shared memory (aligned for T); nullptr past the bytes reserved
+  template <class T>
+  CPS_HD T* shared(size_t count) {
+    size_t at = (used_ + alignof(T) - 1) / alignof(T) * alignof(T);
+    if (at + count * sizeof(T) > bytes_) return nullptr;
+    used_ = at + count * sizeof(T);
+    return reinterpret_cast<T*>(base_ + at);
+  }
+
+  unsigned char* base_ = nullptr;
+  size_t bytes_ = 0;
+  size_t used_ = 0;
+};
+
+template <int kTile, class F>
+__global__ void __launch_bounds__(kTile) k_for_each_tile(int ntiles, F f, size_t bytes) {
+  extern __shared__ __align__(16) unsigned char cps_tile_smem[];
+  CudaTile<kTile> t;
+  t.base_ = cps_tile_smem;
+  t.bytes_ = bytes;
+  f(int(blockIdx.x), t);
+}
+
+// f(i) for i in [0, n) unless *flag is 0: every thread reads the flag and leaves at once (a
+// grid-stride loop keeps the grid small, so a skipped stage costs one short launch)
+template <class F>
+__global__ void k_for_each_if(const int* flag, int n, F f) {
+  if (*flag == 0) return;
+  const long long stride = (long long)gridDim.x * blockDim.x;
+  for (long long i = (long long)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += stride) f(int(i));
+}
+
+// the sum of a scan's n inputs: its last output plus its last input
+template <class T, class U>
+__global__ void k_scan_total(const T* in, const U* out, int n, U* total) {
+  *total = n > 0 ? U(out[n - 1] + U(in[n - 1])) : U(0);
+}
+
+// the scan's operator: sums in the output type U
+template <class U>
+struct ScanPlus {
+  CPS_HD U operator()(const U& a, const U& b) const { return U(a + b); }
+};
+
 struct CudaExec {
   static constexpr bool on_device = true;
   static constexpr int kBlock = 128;
@@ -139,14 +215,26 @@ struct CudaExec {
     size_t size() const { return n; }
   };
 
-  CudaExec() {
+  // the current device
+  CudaExec() : CudaExec(current_device()) {}
+  // device `device` (made current; later calls make it current again before launching or
+  // allocating, so several execs may share a host thread)
+  explicit CudaExec(int device) : device_(device) {
+    int count = 0;
+    CPS_CUDA_CHECK(cudaGetDeviceCount(&count));
+    if (device < 0 || device >= count)
+      throw Error("CUDA device " + std::to_string(device) + " does not exist (" + std::to_string(count) +
+                  " device" + (count == 1 ? "" : "s") + ")");
+    CPS_CUDA_CHECK(cudaSetDevice(device_));
+    CPS_CUDA_CHECK(cudaDeviceGetAttribute(&sms_, cudaDevAttrMultiProcessorCount, device_));
     CPS_CUDA_CHECK(cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking));
   }
   CudaExec(CudaExec&& o) noexcept
-      : stream_(std::exchange(o.stream_, nullptr)), temp_(std::exchange(o.temp_, nullptr)),
-        temp_bytes_(std::exchange(o.temp_bytes_, 0)), counter_(std::exchange(o.counter_, nullptr)),
-        poll_bytes_(std::exchange(o.poll_bytes_, 0)), stage_host_(std::exchange(o.stage_host_, nullptr)),
-        stage_event_(std::exchange(o.stage_event_, nullptr)), stage_bytes_(std::exchange(o.stage_bytes_, 0)) {
+      : device_(o.device_), sms_(o.sms_), stream_(std::exchange(o.stream_, nullptr)),
+        temp_(std::exchange(o.temp_, nullptr)), temp_bytes_(std::exchange(o.temp_bytes_, 0)),
+        counter_(std::exchange(o.counter_, nullptr)), poll_bytes_(std::exchange(o.poll_bytes_, 0)),
+        stage_host_(std::exchange(o.stage_host_, nullptr)), stage_event_(std::exchange(o.stage_event_, nullptr)),
+        stage_bytes_(std::exchange(o.stage_bytes_, 0)) {
     for (int p = 0; p < 2; ++p) {
       graph_[p] = std::exchange(o.graph_[p], nullptr);
       eager_[p] = o.eager_[p];
@@ -156,6 +244,7 @@ struct CudaExec {
   }
   CudaExec(const CudaExec&) = delete;
   ~CudaExec() {
+    if (stream_) cudaSetDevice(device_);
     for (auto& g : graph_)
       if (g) cudaGraphExecDestroy(g);
     for (auto& e : events_) cudaEventDestroy(e.second);
@@ -171,9 +260,17 @@ struct CudaExec {
   }
 
   const char* name() const { return "cuda"; }
+  int device() const { return device_; }
+  // make this exec's device current (Buffer::resize allocates on the current device: call it
+  // first, or use resize(buffer, n), where several devices are in use)
+  void activate() const {
+    int cur = -1;
+    if (cudaGetDevice(&cur) != cudaSuccess || cur != device_) CPS_CUDA_CHECK(cudaSetDevice(device_));
+  }
 
   template <class F>
   void for_each(int n, const F& f) {
+    activate();
     if (n <= 0) return;
     k_for_each<<<(n + kBlock - 1) / kBlock, kBlock, 0, stream_>>>(n, f);
     CPS_CUDA_LAUNCH_CHECK();
@@ -181,6 +278,7 @@ struct CudaExec {
 
   template <class F>
   void for_each_lanes(int n, const F& f) {
+    activate();
     if (n <= 0) return;
     long long threads = 32LL * n;
     k_for_each_warp<<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
@@ -191,6 +289,7 @@ struct CudaExec {
   // kernel for small n (the last block reduces), two launches otherwise
   template <class F, class T, class Op, class Fin>
   void for_each_lanes_reduce_then(int n, const F& f, const T* items, T* out, Op op, T init, const Fin& fin) {
+    activate();
     if (n <= 0 || n > kSmallReduce) {
       for_each_lanes(n, f);
       reduce_then(items, n, out, op, init, fin);
@@ -208,6 +307,7 @@ struct CudaExec {
 
   template <class F>
   void single(const F& f) {
+    activate();
     k_single<<<1, 1, 0, stream_>>>(f);
     CPS_CUDA_LAUNCH_CHECK();
   }
@@ -219,6 +319,7 @@ struct CudaExec {
   template <class E, class F>
   void sort_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits, const E& enabled,
                  const F& f) {
+    activate();
     if (n <= kSortThreads * kSortItems) {
       const unsigned blocks = unsigned((n + kSortThreads - 1) / kSortThreads);
       k_block_sort_then<kSortThreads, kSortItems>
@@ -231,6 +332,7 @@ struct CudaExec {
   }
 
   void sort_pairs(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits) {
+    activate();
     size_t bytes = 0;
     CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
     ensure_temp(bytes);
@@ -240,6 +342,7 @@ struct CudaExec {
   // deterministic reduction: one block for small inputs, CUB's device reduce beyond
   template <class T, class Op>
   void reduce(const T* in, int n, T* out, Op op, T init) {
+    activate();
     if (n <= kSmallReduce) {
       k_reduce_block_then<T, Op, NoStage, kReduceThreads><<<1, kReduceThreads, 0, stream_>>>(in, n, out, op, init,
                                                                                              NoStage{});
@@ -254,6 +357,7 @@ struct CudaExec {
 
   template <class T, class Op, class F>
   void reduce_then(const T* in, int n, T* out, Op op, T init, const F& f) {
+    activate();
     if (n <= kSmallReduce) {
       k_reduce_block_then<T, Op, F, kReduceThreads><<<1, kReduceThreads, 0, stream_>>>(in, n, out, op, init, f);
       CPS_CUDA_LAUNCH_CHECK();
@@ -263,20 +367,124 @@ struct CudaExec {
     single(f);
   }
 
-  void zero(void* p, size_t bytes) { CPS_CUDA_CHECK(cudaMemsetAsync(p, 0, bytes, stream_)); }
+  // ---- engine primitives (pointers are device memory; names and results match CpuExec's) ----
+
+  // allocate b for n elements (zero-filled) on this exec's device
+  template <class T>
+  void resize(Buffer<T>& b, size_t n) {
+    activate();
+    b.resize(n);
+  }
+
+  // out[i] = in[0] + ... + in[i-1] (out[0] = 0), summed in U; *total = the sum of all n,
+  // written on the device (total may be out + n for CSR offsets, or null). CUB's device
+  // scan; in and out must not overlap.
+  template <class T, class U>
+  void exclusive_scan(const T* in, U* out, int n, U* total = nullptr) {
+    activate();
+    if (n > 0) {
+      size_t bytes = 0;
+      CPS_CUDA_CHECK(cub::DeviceScan::ExclusiveScan(nullptr, bytes, in, out, ScanPlus<U>{}, U(0), n, stream_));
+      ensure_temp(bytes);
+      CPS_CUDA_CHECK(cub::DeviceScan::ExclusiveScan(temp_, bytes, in, out, ScanPlus<U>{}, U(0), n, stream_));
+    }
+    if (total) {
+      k_scan_total<<<1, 1, 0, stream_>>>(in, out, n, total);
+      CPS_CUDA_LAUNCH_CHECK();
+    }
+  }
+
+  // stream compaction: the indices i with flags[i] != 0, ascending, into
+  // out_indices[0, *out_count) (*out_count written on the device); CUB's DeviceSelect
+  void select_flagged(const int* flags, int n, int* out_indices, int* out_count) {
+    activate();
+    if (n <= 0) {
+      CPS_CUDA_CHECK(cudaMemsetAsync(out_count, 0, sizeof(int), stream_));
+      return;
+    }
+    thrust::counting_iterator<int> iota(0);
+    size_t bytes = 0;
+    CPS_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, bytes, iota, flags, out_indices, out_count, n, stream_));
+    ensure_temp(bytes);
+    CPS_CUDA_CHECK(cub::DeviceSelect::Flagged(temp_, bytes, iota, flags, out_indices, out_count, n, stream_));
+  }
+
+  // out[s] = op over items[offsets[s], offsets[s+1]) seeded with init (an empty segment gives
+  // init); CUB's segmented reduce: a block per segment with a fixed tree, so the same on
+  // every run (float results differ from the CPU's left-to-right order by rounding only)
+  template <class T, class O, class Op>
+  void segmented_reduce(const T* items, const O* offsets, int nsegments, T* out, Op op, T init) {
+    activate();
+    if (nsegments <= 0) return;
+    size_t bytes = 0;
+    CPS_CUDA_CHECK(cub::DeviceSegmentedReduce::Reduce(nullptr, bytes, items, out, nsegments, offsets, offsets + 1,
+                                                      op, init, stream_));
+    ensure_temp(bytes);
+    CPS_CUDA_CHECK(cub::DeviceSegmentedReduce::Reduce(temp_, bytes, items, out, nsegments, offsets, offsets + 1, op,
+                                                      init, stream_));
+  }
+
+  // CUB's stable radix sort of (64-bit key, value) pairs over the low `bits` key bits
+  void sort_pairs(const uint64_t* kin, uint64_t* kout, const int* vin, int* vout, int n, int bits) {
+    activate();
+    if (n <= 0) return;
+    size_t bytes = 0;
+    CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
+    ensure_temp(bytes);
+    CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp_, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
+  }
+
+  // f(tile, CudaTile<kTile>&) on a block of kTile threads per tile, with shared_bytes of
+  // dynamic shared memory per block (more than 48 KiB is requested from the device)
+  template <int kTile, class F>
+  void for_each_tile(int ntiles, const F& f, size_t shared_bytes = 0) {
+    static_assert(kTile >= 1 && kTile <= 1024, "a tile is one CUDA block: 1 to 1024 threads");
+    activate();
+    if (ntiles <= 0) return;
+    if (shared_bytes > 48 * 1024)
+      CPS_CUDA_CHECK(cudaFuncSetAttribute(k_for_each_tile<kTile, F>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                          int(shared_bytes)));
+    k_for_each_tile<kTile, F><<<unsigned(ntiles), kTile, shared_bytes, stream_>>>(ntiles, f, shared_bytes);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // for_each(n, f) unless *flag (device memory) is 0: the kernel reads the flag and returns
+  // at once, so a stage can be switched off by an earlier stage without a host round trip
+  // (and inside a captured graph)
+  template <class F>
+  void for_each_if(const int* flag, int n, const F& f) {
+    activate();
+    if (n <= 0) return;
+    long long blocks = (n + kBlock - 1) / kBlock;
+    const long long cap = 16LL * (sms_ > 0 ? sms_ : 1);
+    if (blocks > cap) blocks = cap;
+    k_for_each_if<<<unsigned(blocks), kBlock, 0, stream_>>>(flag, n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  void zero(void* p, size_t bytes) {
+    activate();
+    CPS_CUDA_CHECK(cudaMemsetAsync(p, 0, bytes, stream_));
+  }
   void to_host(void* dst, const void* src, size_t bytes) {
+    activate();
     CPS_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToHost, stream_));
     CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
   }
   void to_device(void* dst, const void* src, size_t bytes) {
+    activate();
     CPS_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyHostToDevice, stream_));
     CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
   }
-  void synchronize() { CPS_CUDA_CHECK(cudaStreamSynchronize(stream_)); }
+  void synchronize() {
+    activate();
+    CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
+  }
 
   // a small upload ordered before the next launch, without waiting for the device: the
   // bytes go through pinned staging (reused once its last copy has been done)
   void upload_async(void* dst, const void* src, size_t bytes) {
+    activate();
     if (bytes > stage_bytes_) {
       synchronize();
       if (stage_host_) CPS_CUDA_CHECK(cudaFreeHost(stage_host_));
@@ -294,6 +502,7 @@ struct CudaExec {
   // scalar snapshots between batches of steps: an asynchronous copy into pinned host
   // memory (two slots, so one is read while the other is written) and an event per slot
   void poll_begin(int slot, const void* src, size_t bytes) {
+    activate();
     slot &= 1;
     if (bytes > poll_bytes_) {
       synchronize();
@@ -308,6 +517,7 @@ struct CudaExec {
     CPS_CUDA_CHECK(cudaEventRecord(poll_event_[slot], stream_));
   }
   const void* poll_wait(int slot) {
+    activate();
     slot &= 1;
     CPS_CUDA_CHECK(cudaEventSynchronize(poll_event_[slot]));
     return poll_host_[slot];
@@ -317,6 +527,7 @@ struct CudaExec {
   // storage), later ones replay a CUDA graph captured once per parity
   template <class F>
   void launch_step(int parity, const F& enqueue) {
+    activate();
     if (parity < 0 || profiling_ || !graphs_ || eager_[parity] < 1) {
       if (parity >= 0) eager_[parity] += 1;
       enqueue();
@@ -335,17 +546,20 @@ struct CudaExec {
 
   // stage timing with CUDA events between stages
   void profile_begin() {
+    activate();
     profiling_ = true;
     marks_.clear();
     marks_.push_back({-1, event(0)});
     CPS_CUDA_CHECK(cudaEventRecord(marks_.back().second, stream_));
   }
   void mark(int stage) {
+    activate();
     if (!profiling_) return;
     marks_.push_back({stage, event(marks_.size())});
     CPS_CUDA_CHECK(cudaEventRecord(marks_.back().second, stream_));
   }
   std::vector<double> profile_end() {
+    activate();
     profiling_ = false;
     synchronize();
     std::vector<double> ms;
@@ -362,6 +576,7 @@ struct CudaExec {
   // seconds for run(), between two events on the stream
   template <class F>
   double time(const F& run) {
+    activate();
     cudaEvent_t a = event(0), b = event(1);
     CPS_CUDA_CHECK(cudaEventRecord(a, stream_));
     run();
@@ -375,7 +590,14 @@ struct CudaExec {
   void set_graphs(bool on) { graphs_ = on; }
 
  private:
+  static int current_device() {
+    int d = 0;
+    CPS_CUDA_CHECK(cudaGetDevice(&d));
+    return d;
+  }
+
   void ensure_temp(size_t bytes) {
+    activate();
     if (bytes <= temp_bytes_) return;
     cudaStreamCaptureStatus st;
     CPS_CUDA_CHECK(cudaStreamIsCapturing(stream_, &st));
@@ -387,6 +609,7 @@ struct CudaExec {
   }
   // a pooled event (index k)
   cudaEvent_t event(size_t k) {
+    activate();
     while (events_.size() <= k) {
       cudaEvent_t e;
       CPS_CUDA_CHECK(cudaEventCreate(&e));
@@ -395,6 +618,8 @@ struct CudaExec {
     return events_[k].second;
   }
 
+  int device_ = 0;
+  int sms_ = 0;  // multiprocessors of the device
   cudaStream_t stream_ = nullptr;
   void* temp_ = nullptr;
   size_t temp_bytes_ = 0;

@@ -1,0 +1,364 @@
+// A uniform cell grid with per-axis extents, keyed in 64-bit Morton order.
+//
+// Cells have an edge of at least the query radius; each axis has as many cells as the
+// domain needs (a 4 x 1 x 1 m tank at 1 cm cells: 400 x 100 x 100 cells), so memory follows
+// the domain. Particles are sorted by a 64-bit key
+//
+//     key = (tag << (D * bits)) | morton(cell),     bits = Morton bits for the longest axis
+//
+// so every tag (a layer: fluid / ghosts, or a scene of a batch) stays contiguous and sorted
+// by cell inside; unused slots (tag outside [0, ntags)) get kSentinel and sort last. The
+// cell table is indexed by tag * ncells + linear cell index (x fastest), not by the Morton
+// code, so it holds exactly ntags * dims[0] * ... * dims[D-1] ranges. Positions outside the
+// domain (and NaN) clamp into the border cells: they are still found, the distance check
+// decides. Cell counts and table offsets are 64-bit; particle slots are int.
+//
+// Two particles closer than the radius must never land two cells apart, whatever their
+// coordinates: the cell of a position is computed in double (exact difference, one
+// rounding, so the error does not grow with the coordinate), and the cell edge is the
+// radius plus 1e-6 of it, which covers the float rounding of the distance check itself.
+//
+// Build: sort (keys, stable sort; order() maps sorted slot -> input slot), reorder (the
+// caller's arrays, or the grid's own copy of the positions), mark (cell ranges from the
+// sorted keys). The view (CellGridView) follows the protocol of spatial/index.h; its slot
+// numbers are sorted slots.
+#pragma once
+#include <cmath>
+#include <cstddef>
+#include <cstdio>
+#include <string>
+
+#include "corpuscle/core/error.h"
+#include "corpuscle/spatial/index.h"
+#include "corpuscle/spatial/morton.h"
+
+namespace cps {
+
+// the default limit on a grid's cell table (ntags * cells): 2^31 ranges, 16 GiB of table
+constexpr uint64_t kCellGridMaxCells = uint64_t(1) << 31;
+
+// a count for messages (exact below 2^53, which is all a message needs)
+inline std::string cell_count_text(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, v < 1e15 ? "%.0f" : "%.3g", v);
+  return buf;
+}
+
+template <int D>
+struct CellGridSpec {
+  static constexpr uint64_t kSentinel = ~uint64_t(0);
+
+  Vec<D> origin;      // lower corner of cell (0, ..., 0) = the domain's lower corner
+  float cell = 0.0f;      // cell edge: the radius plus a rounding margin
+  double inv_cell = 0.0;  // 1 / cell
+  float radius = 0.0f;   // the largest query radius the grid answers
+  int dims[D] = {};      // cells per axis
+  uint64_t ncells = 0;   // dims[0] * ... * dims[D-1]: the cells of one tag
+  int bits = 0;          // Morton bits per axis
+  int ntags = 1;         // tags 0 .. ntags-1
+  int key_bits = 0;      // key bits the sort looks at
+
+  CPS_HD int tag_shift() const { return D * bits; }
+  CPS_HD uint64_t table_size() const { return uint64_t(ntags) * ncells; }
+
+  // integer cell of a position, clamped into the grid (NaN: cell 0)
+  CPS_HD void cell_of(const Vec<D>& x, int* c) const {
+    for (int k = 0; k < D; ++k) {
+      const double f = (double(x[k]) - double(origin[k])) * inv_cell;
+      // compare before converting: no overflow for far-away (or infinite) positions, NaN fails both
+      c[k] = f >= 0.0 ? (f < double(dims[k]) ? int(f) : dims[k] - 1) : 0;
+    }
+  }
+  CPS_HD uint64_t linear(const int* c) const {
+    uint64_t s = uint64_t(c[D - 1]);
+    for (int k = D - 2; k >= 0; --k) s = s * uint64_t(dims[k]) + uint64_t(c[k]);
+    return s;
+  }
+  CPS_HD uint64_t key(const Vec<D>& x, int tag) const {
+    if (tag < 0 || tag >= ntags) return kSentinel;
+    int c[D];
+    cell_of(x, c);
+    return (uint64_t(tag) << tag_shift()) | morton_encode64<D>(c);
+  }
+  CPS_HD int tag_of_key(uint64_t k) const { return int(k >> tag_shift()); }
+  // the cell table slot of a (non-sentinel) key
+  CPS_HD uint64_t slot_of_key(uint64_t k) const {
+    const int s = tag_shift();
+    int c[D];
+    morton_decode64<D>(s >= 64 ? k : (k & ((uint64_t(1) << s) - 1u)), c);
+    return uint64_t(tag_of_key(k)) * ncells + linear(c);
+  }
+};
+
+// a grid over the domain [lo, hi] answering radii up to `radius`, for tags 0 .. ntags-1;
+// throws cps::Error for bad arguments or when the table would exceed max_cells ranges
+template <int D>
+inline CellGridSpec<D> make_cell_grid(const Vec<D>& lo, const Vec<D>& hi, float radius, int ntags = 1,
+                                      uint64_t max_cells = kCellGridMaxCells) {
+  if (!(radius > 0.0f) || !finite(radius))
+    throw Error("cell grid: the radius must be positive and finite, got " + std::to_string(radius));
+  if (ntags < 1) throw Error("cell grid: needs at least one tag, got " + std::to_string(ntags));
+  double extent[D];
+  double longest = 1.0;
+  for (int k = 0; k < D; ++k) {
+    if (!finite(lo[k]) || !finite(hi[k]) || !(hi[k] >= lo[k]))
+      throw Error("cell grid: the domain's upper corner must not lie below the lower one (axis " +
+                  std::to_string(k) + ": " + std::to_string(lo[k]) + " .. " + std::to_string(hi[k]) + ")");
+    extent[k] = double(hi[k]) - double(lo[k]);
+    longest = std::fmax(longest, extent[k] / double(radius));
+  }
+  if (longest > double(int(1) << 30))
+    throw Error("cell grid: an axis would need " + cell_count_text(longest) + " cells of " + std::to_string(radius) +
+                " (more than 2^30)");
+  CellGridSpec<D> g;
+  g.radius = radius;
+  g.ntags = ntags;
+  // cell edge = radius * (1 + 1e-6), rounded up to a float (see the top of this file)
+  const double want = double(radius) * (1.0 + 1e-6);
+  float cell = float(want);
+  while (double(cell) < want) cell = std::nextafter(cell, 2.0f * cell);
+  g.cell = cell;
+  g.inv_cell = 1.0 / double(cell);
+  int widest = 1;
+  uint64_t ncells = 1;
+  for (int k = 0; k < D; ++k) {
+    const double n = std::ceil(extent[k] / double(cell));
+    g.dims[k] = n < 1.0 ? 1 : int(n);
+    widest = g.dims[k] > widest ? g.dims[k] : widest;
+    g.origin[k] = lo[k];
+  }
+  std::string shape;
+  double cells = 1.0;
+  for (int k = 0; k < D; ++k) {
+    cells *= double(g.dims[k]);
+    shape += (k ? " x " : "") + std::to_string(g.dims[k]);
+  }
+  if (cells * double(ntags) > double(max_cells))
+    throw Error("cell grid: " + shape + " cells of " + std::to_string(cell) + (ntags > 1 ? " for " + std::to_string(ntags) + " tags" : std::string()) +
+                " would need " + cell_count_text(cells * double(ntags)) + " cell ranges, more than the limit of " +
+                cell_count_text(double(max_cells)) + ": use a larger radius, a smaller domain or fewer tags");
+  for (int k = 0; k < D; ++k) ncells *= uint64_t(g.dims[k]);
+  g.ncells = ncells;
+  g.bits = 0;
+  while ((int64_t(1) << g.bits) < int64_t(widest)) ++g.bits;
+  int tag_bits = 0;  // 2^tag_bits > ntags: every real key stays below the sentinel's low key_bits bits
+  while ((int64_t(1) << tag_bits) <= int64_t(ntags)) ++tag_bits;
+  g.key_bits = D * g.bits + tag_bits;
+  if (g.bits > morton_max_bits64<D>() || g.key_bits > 64)
+    throw Error("cell grid: " + shape + " cells with " + std::to_string(ntags) + " tags need " +
+                std::to_string(g.key_bits) + " key bits, more than a 64-bit key holds: use a larger radius or fewer tags");
+  return g;
+}
+
+// the sorted particles and the cell table, passed by value to functors
+template <int D>
+struct CellGridView {
+  static constexpr int kDim = D;
+  CellGridSpec<D> spec;
+  const Vec<D>* pos = nullptr;           // positions in sorted order
+  const uint64_t* keys = nullptr;        // sorted keys (kSentinel: unused slot)
+  const uint32_t* cell_start = nullptr;  // spec.table_size() entries each
+  const uint32_t* cell_end = nullptr;
+  int n = 0;                             // slots
+  float r2 = 0.0f;                       // squared query radius
+  int tag_begin = 0, tag_end = 1;        // the tags gathered from ...
+  bool own_tag = false;                  // ... or only the tag of slot i (scenes of a batch)
+
+  CPS_HD int size() const { return n; }
+  CPS_HD bool active(int i) const { return keys[i] != CellGridSpec<D>::kSentinel; }
+  CPS_HD const Vec<D>& position(int i) const { return pos[i]; }
+  CPS_HD float max_radius() const { return spec.radius; }
+  CPS_HD CellGridView with_radius(float r) const {
+    CellGridView v = *this;
+    v.r2 = r * r;
+    return v;
+  }
+  // gather from tags [a, b) only
+  CPS_HD CellGridView tags(int a, int b) const {
+    CellGridView v = *this;
+    v.tag_begin = a < 0 ? 0 : a;
+    v.tag_end = b > spec.ntags ? spec.ntags : b;
+    v.own_tag = false;
+    return v;
+  }
+  // gather for slot i from slot i's tag only (i must be an active slot)
+  CPS_HD CellGridView own_tags() const {
+    CellGridView v = *this;
+    v.own_tag = true;
+    return v;
+  }
+
+  template <class Visit>
+  CPS_HD void gather(int i, const Vec<D>& xi, Visit&& visit) const {
+    walk<false>(i, xi, visit);
+  }
+  template <class Visit>
+  CPS_HD void pairs(int i, const Vec<D>& xi, Visit&& visit) const {
+    walk<true>(i, xi, visit);
+  }
+
+  // tags in order, then the cells around xi's cell (z, y, x, each from low to high; cells
+  // outside the grid skipped, so a grid narrower than three cells visits no cell twice), then
+  // each cell's slots in sorted order
+  template <bool kPairs, class Visit>
+  CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit) const {
+    int c[D];
+    spec.cell_of(xi, c);
+    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+    for (int k = 0; k < D; ++k) {
+      lo[k] = c[k] > 0 ? c[k] - 1 : 0;
+      hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
+    }
+    int t0 = tag_begin, t1 = tag_end;
+    if (own_tag) {
+      t0 = spec.tag_of_key(keys[i]);
+      t1 = t0 + 1;
+    }
+    const uint64_t dx = uint64_t(spec.dims[0]);
+    const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
+    for (int t = t0; t < t1; ++t) {
+      const uint64_t tbase = uint64_t(t) * spec.ncells;
+      for (int z = lo[2]; z <= hi[2]; ++z) {
+        for (int y = lo[1]; y <= hi[1]; ++y) {
+          const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
+          for (int x = lo[0]; x <= hi[0]; ++x) {
+            const uint64_t slot = row + uint64_t(x);
+            uint32_t s = cell_start[slot];
+            const uint32_t e = cell_end[slot];
+            if (kPairs && s <= uint32_t(i)) s = uint32_t(i) + 1u;
+            for (uint32_t j = s; j < e; ++j) {
+              Vec<D> d = xi - pos[j];
+              float rr = norm2(d);
+              if (rr < r2) visit(int(j), d, rr);
+            }
+          }
+        }
+      }
+    }
+  }
+};
+
+// ---- build stages (one thread per slot) ----
+
+template <int D>
+struct CellKeysFn {
+  CellGridSpec<D> spec;
+  const Vec<D>* pos;
+  const int* tags;  // null: every slot has tag 0
+  uint64_t* keys;
+  int* ids;
+  CPS_HD void operator()(int i) const {
+    keys[i] = spec.key(pos[i], tags ? tags[i] : 0);
+    ids[i] = i;
+  }
+};
+
+template <class T>
+struct ReorderFn {
+  const int* order;
+  const T* in;
+  T* out;
+  CPS_HD void operator()(int j) const { out[j] = in[order[j]]; }
+};
+
+// record the cell range of sorted slot j (tables zeroed beforehand)
+template <int D>
+struct CellMarkFn {
+  CellGridSpec<D> spec;
+  const uint64_t* keys;
+  int n;
+  uint32_t* start;
+  uint32_t* end;
+  CPS_HD void operator()(int j) const {
+    const uint64_t k = keys[j];
+    if (k == CellGridSpec<D>::kSentinel) return;
+    const uint64_t slot = spec.slot_of_key(k);
+    if (j == 0 || keys[j - 1] != k) start[slot] = uint32_t(j);
+    if (j == n - 1 || keys[j + 1] != k) end[slot] = uint32_t(j + 1);
+  }
+};
+
+// the host side: the keys, the sort order, the cell table and (for build) a sorted copy of
+// the positions, in Exec buffers that grow with the particle count
+template <int D, class Exec>
+class CellGrid {
+ public:
+  template <class T>
+  using Buffer = typename Exec::template Buffer<T>;
+
+  explicit CellGrid(const CellGridSpec<D>& spec) : spec_(spec) {}
+  const CellGridSpec<D>& spec() const { return spec_; }
+
+  // 1. key slot i from pos[i] and tags[i] (null: tag 0; a tag outside [0, ntags): an unused
+  //    slot), then stable-sort the keys
+  void sort(Exec& ex, const Vec<D>* pos, const int* tags, int n) {
+    n_ = n;
+    grow(ex, keys_, n);
+    grow(ex, keys_sorted_, n);
+    grow(ex, ids_, n);
+    grow(ex, order_, n);
+    ex.for_each(n, CellKeysFn<D>{spec_, pos, tags, keys_.data(), ids_.data()});
+    ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+  }
+  // 2. out[j] = in[order()[j]]: an array in sorted order (in and out distinct)
+  template <class T>
+  void reorder(Exec& ex, const T* in, T* out) const {
+    ex.for_each(n_, ReorderFn<T>{order_.data(), in, out});
+  }
+  // 3. the cell ranges of the sorted keys
+  void mark(Exec& ex) {
+    const uint64_t entries = spec_.table_size();
+    if (start_.size() < entries) {
+      ex.resize(start_, entries);
+      ex.resize(end_, entries);
+    }
+    ex.zero(start_.data(), entries * sizeof(uint32_t));
+    ex.zero(end_.data(), entries * sizeof(uint32_t));
+    ex.for_each(n_, CellMarkFn<D>{spec_, keys_sorted_.data(), n_, start_.data(), end_.data()});
+  }
+  // all three, keeping a sorted copy of the positions for view()
+  void build(Exec& ex, const Vec<D>* pos, const int* tags, int n) {
+    sort(ex, pos, tags, n);
+    grow(ex, sorted_pos_, n);
+    reorder(ex, pos, sorted_pos_.data());
+    mark(ex);
+  }
+
+  // the view over positions in sorted order (the caller's reordered array), every tag
+  CellGridView<D> view(const Vec<D>* sorted_pos) const {
+    CellGridView<D> v;
+    v.spec = spec_;
+    v.pos = sorted_pos;
+    v.keys = keys_sorted_.data();
+    v.cell_start = start_.data();
+    v.cell_end = end_.data();
+    v.n = n_;
+    v.r2 = spec_.radius * spec_.radius;
+    v.tag_begin = 0;
+    v.tag_end = spec_.ntags;
+    return v;
+  }
+  // the view over the grid's own sorted copy (after build)
+  CellGridView<D> view() const { return view(sorted_pos_.data()); }
+
+  int size() const { return n_; }
+  const int* order() const { return order_.data(); }             // sorted slot -> input slot
+  const uint64_t* sorted_keys() const { return keys_sorted_.data(); }
+  const Vec<D>* sorted_positions() const { return sorted_pos_.data(); }
+  uint64_t table_entries() const { return spec_.table_size(); }
+
+ private:
+  template <class T>
+  static void grow(Exec& ex, Buffer<T>& b, int n) {
+    if (b.size() < size_t(n) || b.size() == 0) ex.resize(b, size_t(n > 0 ? n : 1));
+  }
+
+  CellGridSpec<D> spec_;
+  int n_ = 0;
+  Buffer<uint64_t> keys_, keys_sorted_;
+  Buffer<int> ids_, order_;
+  Buffer<Vec<D>> sorted_pos_;
+  Buffer<uint32_t> start_, end_;
+};
+
+}  // namespace cps

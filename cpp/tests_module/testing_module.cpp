@@ -1,0 +1,374 @@
+// nanobind module corpuscle._testing: the engine's lower layers (exec primitives, Morton
+// codes, spatial indexes) exposed to pytest on every backend ("serial", "cpu" and, where the
+// CUDA backend is built and a device is usable, "cuda" / "cuda:N"). Test-only: nothing in
+// the package imports it.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
+#include <nanobind/stl/pair.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include <cstring>
+#include <optional>
+#include <tuple>
+
+#include "cpu/exec_cpu.h"
+#include "testing_ops.h"
+
+namespace nb = nanobind;
+using namespace cps;
+using namespace cps::testing;
+
+namespace {
+
+using Array = nb::ndarray<nb::ro, nb::c_contig, nb::device::cpu>;
+
+// ---- backends ----
+CpuExec cpu_exec(bool parallel) {
+  CpuExec e;
+  e.parallel = parallel;
+  return e;
+}
+int cuda_device_of(const std::string& b) {
+  if (b == "cuda") return 0;
+  if (b.rfind("cuda:", 0) == 0) return std::stoi(b.substr(5));
+  return -1;
+}
+std::unique_ptr<PrimOps> prim_ops(const std::string& b) {
+  if (b == "serial") return std::make_unique<PrimOpsImpl<CpuExec>>(cpu_exec(false));
+  if (b == "cpu") return std::make_unique<PrimOpsImpl<CpuExec>>(cpu_exec(true));
+  if (cuda_device_of(b) >= 0) return make_cuda_prim_ops(cuda_device_of(b));
+  throw nb::value_error(("unknown backend '" + b + "' (serial, cpu, cuda, cuda:N)").c_str());
+}
+std::unique_ptr<SpatialOps> spatial_ops(const std::string& b) {
+  if (b == "serial") return std::make_unique<SpatialOpsImpl<CpuExec>>(cpu_exec(false));
+  if (b == "cpu") return std::make_unique<SpatialOpsImpl<CpuExec>>(cpu_exec(true));
+  if (cuda_device_of(b) >= 0) return make_cuda_spatial_ops(cuda_device_of(b));
+  throw nb::value_error(("unknown backend '" + b + "' (serial, cpu, cuda, cuda:N)").c_str());
+}
+
+// ---- arrays ----
+template <class T>
+bool is(const Array& a) {
+  return a.dtype() == nb::dtype<T>();
+}
+template <class T>
+std::vector<T> vec(const Array& a, const char* what) {
+  if (!is<T>(a)) throw nb::type_error((std::string(what) + ": wrong dtype").c_str());
+  std::vector<T> v(a.size());
+  if (a.size()) std::memcpy(v.data(), a.data(), a.size() * sizeof(T));
+  return v;
+}
+template <class T>
+nb::ndarray<nb::numpy> np(const std::vector<T>& v, size_t cols = 0) {
+  auto* buf = new T[v.size() > 0 ? v.size() : 1];
+  if (!v.empty()) std::memcpy(buf, v.data(), v.size() * sizeof(T));
+  nb::capsule owner(buf, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+  size_t shape[2] = {cols ? v.size() / cols : v.size(), cols};
+  return nb::ndarray<nb::numpy>(buf, cols ? 2 : 1, shape, owner, nullptr, nb::dtype<T>());
+}
+
+int index_kind(const std::string& s) {
+  if (s == "allpairs") return kAllPairs;
+  if (s == "allpairs_tiled") return kAllPairsTiled;
+  if (s == "grid") return kCellGrid;
+  if (s == "csr_grid") return kCsrGrid;
+  if (s == "csr_allpairs") return kCsrAllPairs;
+  throw nb::value_error(("unknown index '" + s + "' (allpairs, allpairs_tiled, grid, csr_grid, csr_allpairs)").c_str());
+}
+int reduce_op(const std::string& s) {
+  if (s == "sum") return kSum;
+  if (s == "min") return kMin;
+  if (s == "max") return kMax;
+  throw nb::value_error("op must be sum, min or max");
+}
+
+IndexQuery query(const std::string& index, const Array& pos, float radius, std::optional<std::vector<float>> lo,
+                 std::optional<std::vector<float>> hi, std::optional<Array> tags, int ntags, const std::string& tag_mode,
+                 std::pair<int, int> tag_range, std::optional<float> list_radius) {
+  IndexQuery q;
+  q.kind = index_kind(index);
+  if (pos.ndim() != 2 || (pos.shape(1) != 2 && pos.shape(1) != 3))
+    throw nb::value_error("positions must have shape (n, 2) or (n, 3)");
+  q.dim = int(pos.shape(1));
+  q.n = int(pos.shape(0));
+  q.pos = vec<float>(pos, "positions");
+  q.radius = radius;
+  q.list_radius = list_radius ? *list_radius : radius;
+  if (q.kind == kCellGrid || q.kind == kCsrGrid) {
+    if (!lo || !hi || lo->size() != size_t(q.dim) || hi->size() != size_t(q.dim))
+      throw nb::value_error("a grid index needs lo and hi with one value per axis");
+  }
+  if (lo) q.lo = *lo;
+  if (hi) q.hi = *hi;
+  if (tags) {
+    q.tags = vec<int32_t>(*tags, "tags");
+    if (q.tags.size() != size_t(q.n)) throw nb::value_error("tags: one per particle");
+  }
+  q.ntags = ntags;
+  if (tag_mode == "all")
+    q.tag_mode = kAllTags;
+  else if (tag_mode == "range")
+    q.tag_mode = kTagRange;
+  else if (tag_mode == "own")
+    q.tag_mode = kOwnTag;
+  else
+    throw nb::value_error("tag_mode must be all, range or own");
+  q.tag_a = tag_range.first;
+  q.tag_b = tag_range.second;
+  return q;
+}
+
+nb::dict lists_dict(const Lists& l) {
+  nb::dict d;
+  d["offsets"] = np(l.offsets);
+  d["neighbors"] = np(l.nbr);
+  d["capacity"] = l.capacity;
+  d["grows"] = l.grows;
+  return d;
+}
+
+template <int D>
+nb::dict spec_dict(const std::vector<float>& lo, const std::vector<float>& hi, float radius, int ntags,
+                   uint64_t max_cells) {
+  Vec<D> l, h;
+  for (int k = 0; k < D; ++k) {
+    l[k] = lo.at(k);
+    h[k] = hi.at(k);
+  }
+  CellGridSpec<D> g = make_cell_grid<D>(l, h, radius, ntags, max_cells);
+  nb::dict d;
+  std::vector<int> dims(g.dims, g.dims + D);
+  d["dims"] = dims;
+  d["ncells"] = g.ncells;
+  d["table_entries"] = g.table_size();
+  d["cell"] = g.cell;
+  d["radius"] = g.radius;
+  d["bits"] = g.bits;
+  d["tag_shift"] = g.tag_shift();
+  d["key_bits"] = g.key_bits;
+  d["ntags"] = g.ntags;
+  d["sentinel"] = CellGridSpec<D>::kSentinel;
+  return d;
+}
+
+}  // namespace
+
+NB_MODULE(_testing, m) {
+  m.doc() = "corpuscle engine internals for the tests: exec primitives and spatial indexes on each backend";
+  // cps::Error (bad arguments, a grid past its cell limit, a missing device) is a ValueError,
+  // as in corpuscle._core (whose translator would otherwise apply once _core is loaded)
+  nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const cps::Error& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    }
+  });
+
+  m.def("cuda_available", []() {
+    std::string why;
+    bool ok = cuda_usable(why);
+    return std::make_pair(ok, why);
+  });
+  m.def("backends", []() {
+    std::vector<std::string> b{"serial", "cpu"};
+    std::string why;
+    if (cuda_usable(why)) b.push_back("cuda");
+    return b;
+  });
+  m.def("openmp", []() {
+#ifdef CPS_WITH_OPENMP
+    return true;
+#else
+    return false;
+#endif
+  });
+
+  // ---- Morton codes (host) ----
+  m.def(
+      "morton_encode",
+      [](const Array& coords, bool wide) {
+        if (coords.ndim() != 2 || (coords.shape(1) != 2 && coords.shape(1) != 3))
+          throw nb::value_error("coords must have shape (n, 2) or (n, 3)");
+        const int D = int(coords.shape(1));
+        auto c = vec<int32_t>(coords, "coords");
+        const size_t n = coords.shape(0);
+        std::vector<uint64_t> out(n);
+        for (size_t i = 0; i < n; ++i) {
+          const int* p = c.data() + i * D;
+          if (wide)
+            out[i] = D == 3 ? morton_encode64<3>(p) : morton_encode64<2>(p);
+          else
+            out[i] = D == 3 ? morton_encode<3>(p) : morton_encode<2>(p);
+        }
+        return np(out);
+      },
+      nb::arg("coords"), nb::arg("wide"));
+  m.def(
+      "morton_decode",
+      [](const Array& codes, int dim, bool wide) {
+        auto c = vec<uint64_t>(codes, "codes");
+        if (dim != 2 && dim != 3) throw nb::value_error("dim must be 2 or 3");
+        std::vector<int32_t> out(c.size() * dim);
+        for (size_t i = 0; i < c.size(); ++i) {
+          int* p = out.data() + i * dim;
+          if (wide) {
+            if (dim == 3) morton_decode64<3>(c[i], p); else morton_decode64<2>(c[i], p);
+          } else {
+            if (dim == 3) morton_decode<3>(uint32_t(c[i]), p); else morton_decode<2>(uint32_t(c[i]), p);
+          }
+        }
+        return np(out, size_t(dim));
+      },
+      nb::arg("codes"), nb::arg("dim"), nb::arg("wide"));
+  m.def("morton_max_bits", [](int dim, bool wide) {
+    if (wide) return dim == 3 ? morton_max_bits64<3>() : morton_max_bits64<2>();
+    return dim == 3 ? morton_max_bits<3>() : morton_max_bits<2>();
+  });
+
+  // ---- exec primitives ----
+  m.def(
+      "exclusive_scan",
+      [](const std::string& backend, const Array& values, bool wide) -> nb::tuple {
+        auto ops = prim_ops(backend);
+        if (is<int32_t>(values)) {
+          auto in = vec<int32_t>(values, "values");
+          if (wide) {
+            int64_t t;
+            auto o = ops->scan_i32_i64(in, t);
+            return nb::make_tuple(np(o), t);
+          }
+          int32_t t;
+          auto o = ops->scan_i32(in, t);
+          return nb::make_tuple(np(o), t);
+        }
+        auto in = vec<uint32_t>(values, "values (int32 or uint32)");
+        if (wide) {
+          int64_t t;
+          auto o = ops->scan_u32_i64(in, t);
+          return nb::make_tuple(np(o), t);
+        }
+        uint32_t t;
+        auto o = ops->scan_u32(in, t);
+        return nb::make_tuple(np(o), t);
+      },
+      nb::arg("backend"), nb::arg("values"), nb::arg("wide") = false);
+  m.def(
+      "select_flagged",
+      [](const std::string& backend, const Array& flags) {
+        return np(prim_ops(backend)->select_flagged(vec<int32_t>(flags, "flags")));
+      },
+      nb::arg("backend"), nb::arg("flags"));
+  m.def(
+      "segmented_reduce",
+      [](const std::string& backend, const Array& items, const Array& offsets, const std::string& op,
+         double init) -> nb::object {
+        auto ops = prim_ops(backend);
+        if (is<float>(items)) {
+          auto o = ops->segreduce_f32(vec<float>(items, "items"), vec<int32_t>(offsets, "offsets (int32 for float items)"),
+                                      reduce_op(op), float(init));
+          return nb::cast(np(o));
+        }
+        auto o = ops->segreduce_i32(vec<int32_t>(items, "items (float32 or int32)"),
+                                    vec<int64_t>(offsets, "offsets (int64 for int32 items)"), reduce_op(op), int(init));
+        return nb::cast(np(o));
+      },
+      nb::arg("backend"), nb::arg("items"), nb::arg("offsets"), nb::arg("op"), nb::arg("init"));
+  m.def(
+      "sort_pairs64",
+      [](const std::string& backend, const Array& keys, const Array& values, int bits) {
+        std::vector<uint64_t> ko;
+        std::vector<int> vo;
+        prim_ops(backend)->sort_pairs64(vec<uint64_t>(keys, "keys"), vec<int32_t>(values, "values"), bits, ko, vo);
+        return nb::make_tuple(np(ko), np(vo));
+      },
+      nb::arg("backend"), nb::arg("keys"), nb::arg("values"), nb::arg("bits") = 64);
+  m.def(
+      "tile_exercise",
+      [](const std::string& backend, const Array& x, int tile) {
+        return np(prim_ops(backend)->tile_exercise(vec<float>(x, "x"), tile));
+      },
+      nb::arg("backend"), nb::arg("x"), nb::arg("tile"));
+  m.def(
+      "for_each_if",
+      [](const std::string& backend, int flag, int n) { return np(prim_ops(backend)->for_each_if(flag, n)); },
+      nb::arg("backend"), nb::arg("flag"), nb::arg("n"));
+  m.def(
+      "atomics",
+      [](const std::string& backend, const Array& v) {
+        AtomicsResult r = prim_ops(backend)->atomics(vec<int32_t>(v, "values"));
+        nb::dict d;
+        d["isum"] = r.isum;
+        d["imax"] = r.imax;
+        d["imin"] = r.imin;
+        d["owner"] = r.owner;
+        d["wins"] = r.wins;
+        d["usum"] = r.usum;
+        d["fsum"] = r.fsum;
+        return d;
+      },
+      nb::arg("backend"), nb::arg("values"));
+
+  // ---- spatial indexes ----
+  m.def(
+      "cell_grid_spec",
+      [](int dim, std::vector<float> lo, std::vector<float> hi, float radius, int ntags, uint64_t max_cells) {
+        if (dim == 2) return spec_dict<2>(lo, hi, radius, ntags, max_cells);
+        if (dim == 3) return spec_dict<3>(lo, hi, radius, ntags, max_cells);
+        throw nb::value_error("dim must be 2 or 3");
+      },
+      nb::arg("dim"), nb::arg("lo"), nb::arg("hi"), nb::arg("radius"), nb::arg("ntags") = 1,
+      nb::arg("max_cells") = kCellGridMaxCells);
+
+  m.def(
+      "gather",
+      [](const std::string& backend, const std::string& index, const Array& pos, float radius,
+         std::optional<std::vector<float>> lo, std::optional<std::vector<float>> hi, std::optional<Array> tags,
+         int ntags, const std::string& tag_mode, std::pair<int, int> tag_range, std::optional<float> list_radius) {
+        IndexQuery q = query(index, pos, radius, lo, hi, tags, ntags, tag_mode, tag_range, list_radius);
+        return lists_dict(spatial_ops(backend)->gather(q));
+      },
+      nb::arg("backend"), nb::arg("index"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo") = nb::none(),
+      nb::arg("hi") = nb::none(), nb::arg("tags") = nb::none(), nb::arg("ntags") = 1, nb::arg("tag_mode") = "all",
+      nb::arg("tag_range") = std::make_pair(0, 1), nb::arg("list_radius") = nb::none());
+  m.def(
+      "pairs",
+      [](const std::string& backend, const std::string& index, const Array& pos, float radius,
+         std::optional<std::vector<float>> lo, std::optional<std::vector<float>> hi, std::optional<Array> tags,
+         int ntags, const std::string& tag_mode, std::pair<int, int> tag_range, std::optional<float> list_radius) {
+        IndexQuery q = query(index, pos, radius, lo, hi, tags, ntags, tag_mode, tag_range, list_radius);
+        return np(spatial_ops(backend)->pairs(q), 2);
+      },
+      nb::arg("backend"), nb::arg("index"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo") = nb::none(),
+      nb::arg("hi") = nb::none(), nb::arg("tags") = nb::none(), nb::arg("ntags") = 1, nb::arg("tag_mode") = "all",
+      nb::arg("tag_range") = std::make_pair(0, 1), nb::arg("list_radius") = nb::none());
+  m.def(
+      "csr_rebuilds",
+      [](const std::string& backend, const std::string& index, std::vector<Array> positions, float radius,
+         std::optional<std::vector<float>> lo, std::optional<std::vector<float>> hi, std::optional<float> list_radius) {
+        if (positions.empty()) throw nb::value_error("csr_rebuilds: no position sets");
+        IndexQuery q = query(index, positions[0], radius, lo, hi, std::nullopt, 1, "all", {0, 1}, list_radius);
+        std::vector<std::vector<float>> sets;
+        for (const auto& p : positions) sets.push_back(vec<float>(p, "positions"));
+        nb::list out;
+        for (const auto& l : spatial_ops(backend)->csr_rebuilds(q, sets)) out.append(lists_dict(l));
+        return out;
+      },
+      nb::arg("backend"), nb::arg("index"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo") = nb::none(),
+      nb::arg("hi") = nb::none(), nb::arg("list_radius") = nb::none());
+  m.def(
+      "grid_sort",
+      [](const std::string& backend, const Array& pos, float radius, std::vector<float> lo, std::vector<float> hi,
+         std::optional<Array> tags, int ntags) {
+        IndexQuery q = query("grid", pos, radius, lo, hi, tags, ntags, "all", {0, 1}, std::nullopt);
+        std::vector<uint64_t> keys;
+        std::vector<int> order;
+        spatial_ops(backend)->grid_sort(q, keys, order);
+        return nb::make_tuple(np(keys), np(order));
+      },
+      nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
+      nb::arg("tags") = nb::none(), nb::arg("ntags") = 1);
+}
