@@ -256,3 +256,26 @@ def test_cuda_primitives_match_the_cpu():
     t = rng.integers(-100, 100, 10000).astype(np.float32)
     for tile in (32, 128):
         assert T.tile_exercise("cuda", t, tile).tobytes() == T.tile_exercise("serial", t, tile).tobytes()
+
+
+# ---- lane widths: a stage's own number of cooperating lanes per item -------------------
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("width", [1, 2, 4, 8, 16, 32])
+def test_lanes_of_every_width_find_the_brute_force_neighbours(backend, width):
+    # 300 points (not a multiple of any width, so groups of a warp end at different items)
+    # and a radius that gives each a different number of neighbours
+    rng = np.random.default_rng(width)
+    pos = rng.uniform(0.0, 1.0, size=(300, 3)).astype(np.float32)
+    radius = 0.2
+    counts, sums = T.lanes_gather(backend, pos.reshape(-1), radius, width)
+    d = pos[:, None, :].astype(np.float64) - pos[None, :, :]
+    r2 = (d * d).sum(axis=2)
+    inside = r2 < radius * radius
+    np.testing.assert_array_equal(counts, inside.sum(axis=1))
+    np.testing.assert_allclose(sums, np.where(inside, r2, 0.0).sum(axis=1), rtol=1e-5, atol=1e-7)
+
+
+def test_a_lane_width_that_is_not_a_power_of_two_is_refused():
+    with pytest.raises(ValueError, match="lane width must be 1, 2, 4, 8, 16 or 32, got 3"):
+        T.lanes_gather("serial", np.zeros(6, dtype=np.float32), 0.1, 3)

@@ -293,6 +293,15 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("backend"), nb::arg("x"), nb::arg("tile"));
   m.def(
+      "lanes_gather",
+      [](const std::string& backend, const Array& pos, float radius, int width) {
+        std::vector<int> counts;
+        auto sums = prim_ops(backend)->lanes_gather(vec<float>(pos, "pos"), radius, width, counts);
+        return nb::make_tuple(np(counts), np(sums));
+      },
+      nb::arg("backend"), nb::arg("pos"), nb::arg("radius"), nb::arg("width"),
+      "Counts and sums of r^2 of every point's neighbours within radius (3-D), walked by `width` lanes.");
+  m.def(
       "for_each_if",
       [](const std::string& backend, int flag, int n) { return np(prim_ops(backend)->for_each_if(flag, n)); },
       nb::arg("backend"), nb::arg("flag"), nb::arg("n"));

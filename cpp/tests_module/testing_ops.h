@@ -13,6 +13,7 @@
 
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/error.h"
+#include "corpuscle/core/lanes.h"
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/cell_grid.h"
 #include "corpuscle/spatial/neighbor_list.h"
@@ -47,6 +48,10 @@ struct PrimOps {
   virtual std::vector<float> tile_exercise(const std::vector<float>& x, int tile) = 0;
   virtual std::vector<int> for_each_if(int flag, int n) = 0;
   virtual AtomicsResult atomics(const std::vector<int>& v) = 0;
+  // every point's neighbours within radius among all points (3-D), walked by `width`
+  // cooperating lanes: (counts, sums of r^2)
+  virtual std::vector<float> lanes_gather(const std::vector<float>& pos, float radius, int width,
+                                          std::vector<int>& counts) = 0;
 };
 
 // index kinds
@@ -209,6 +214,25 @@ struct PairsFn {
   }
 };
 
+// the all-pairs walk of lanes cooperating on one point: count and sum of r^2 within the radius
+struct LanesGather {
+  const Vec3* pos;
+  int n;
+  float r2max;
+  float* sums;
+  int* counts;
+  template <class Lanes>
+  CPS_HD void operator()(int i, const Lanes& L) const {
+    float s = 0.0f;
+    auto visit = [&](int, const Vec3&, float r2) { s += r2; };
+    int c = L.for_each_in_range(pos, 0, n, pos[i], r2max, visit);
+    s = L.sum(s);
+    if (!L.leader()) return;
+    sums[i] = s;
+    counts[i] = c;
+  }
+};
+
 // ---------------------------------------------------------------------------------------
 // drivers
 // ---------------------------------------------------------------------------------------
@@ -334,6 +358,32 @@ struct PrimOpsImpl final : PrimOps, Driver<Exec> {
     auto dout = this->template alloc<int>(size_t(n));
     ex.for_each_if(dflag.data(), n, MarkFn{dout.data()});
     return this->download(dout.data(), size_t(n));
+  }
+
+  template <int W>
+  void lanes_gather_w(const Vec3* pos, int n, float r2, float* sums, int* counts) {
+    ex.template for_each_lanes_w<W>(n, LanesGather{pos, n, r2, sums, counts});
+  }
+  std::vector<float> lanes_gather(const std::vector<float>& pos, float radius, int width,
+                                  std::vector<int>& counts) override {
+    const int n = int(pos.size() / 3);
+    auto d_pos = this->upload(pos);
+    auto d_sums = this->template alloc<float>(n);
+    auto d_counts = this->template alloc<int>(n);
+    const Vec3* p = reinterpret_cast<const Vec3*>(d_pos.data());
+    const float r2 = radius * radius;
+    switch (width) {
+      case 1: lanes_gather_w<1>(p, n, r2, d_sums.data(), d_counts.data()); break;
+      case 2: lanes_gather_w<2>(p, n, r2, d_sums.data(), d_counts.data()); break;
+      case 4: lanes_gather_w<4>(p, n, r2, d_sums.data(), d_counts.data()); break;
+      case 8: lanes_gather_w<8>(p, n, r2, d_sums.data(), d_counts.data()); break;
+      case 16: lanes_gather_w<16>(p, n, r2, d_sums.data(), d_counts.data()); break;
+      case 32: lanes_gather_w<32>(p, n, r2, d_sums.data(), d_counts.data()); break;
+      default: throw Error("lane width must be 1, 2, 4, 8, 16 or 32, got " + std::to_string(width));
+    }
+    ex.synchronize();
+    counts = this->download(d_counts.data(), size_t(n));
+    return this->download(d_sums.data(), size_t(n));
   }
 
   AtomicsResult atomics(const std::vector<int>& v) override {

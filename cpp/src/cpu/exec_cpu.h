@@ -99,6 +99,11 @@ struct CpuExec {
   void for_each_lanes(int n, const F& f) const {
     for_each(n, [&](int i) { f(i, SingleLane{}); });
   }
+  // the same with a stage's own lane width (the CPU runs one lane whatever W is)
+  template <int W, class F>
+  void for_each_lanes_w(int n, const F& f) const {
+    for_each_lanes(n, f);
+  }
 
   // for_each_lanes, then reduce_then
   template <class F, class T, class Op, class Fin>

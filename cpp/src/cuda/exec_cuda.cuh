@@ -32,6 +32,15 @@ __global__ void k_for_each_warp(int n, F f) {
   if (i < n) f(i, WarpLanes{});
 }
 
+// W lanes per item (a group of a warp): functor f(i, SubWarpLanes<W>); the groups of an
+// item leave together, so the group masks stay whole
+template <int W, class F>
+__global__ void k_for_each_lanes_w(int n, F f) {
+  long long t = (long long)blockIdx.x * blockDim.x + threadIdx.x;
+  int i = int(t / W);
+  if (i < n) f(i, SubWarpLanes<W>{});
+}
+
 // reduce in[0, n) in one block (fixed striding and tree, so the same on every run); thread
 // 0 writes *out and runs f(0) on it
 template <class T, class Op, class F, int kThreads>
@@ -282,6 +291,16 @@ struct CudaExec {
     if (n <= 0) return;
     long long threads = 32LL * n;
     k_for_each_warp<<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // a stage's own lane width W (1 ... 32 lanes per item)
+  template <int W, class F>
+  void for_each_lanes_w(int n, const F& f) {
+    activate();
+    if (n <= 0) return;
+    long long threads = (long long)W * n;
+    k_for_each_lanes_w<W><<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 

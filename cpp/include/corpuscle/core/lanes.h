@@ -197,6 +197,126 @@ struct WarpLanes {
     e = g.cell_end[slot];
   }
 };
+
+// W cooperating lanes of a warp (W = 1, 2, 4, ..., 32) per item: a stage chooses its width
+// (warp-per-particle suits SPH's 100+ neighbours; DEM's ~6 contacts want a few lanes). Every
+// loop strides by W; sums reduce by shuffles within the group, ballots are masked to it, so
+// groups of one warp run different items independently. WarpLanes is the tuned W = 32 form.
+template <int W>
+struct SubWarpLanes {
+  static_assert(W >= 1 && W <= 32 && (W & (W - 1)) == 0, "lane width must be a power of two up to 32");
+  __device__ int lane() const { return int(threadIdx.x) & (W - 1); }
+  __device__ int base() const { return int(threadIdx.x) & 31 & ~(W - 1); }
+  __device__ unsigned mask() const {
+    if constexpr (W == 32) return 0xffffffffu;
+    else return ((1u << W) - 1u) << base();
+  }
+  // the group's bits of a ballot, lane 0 of the group in bit 0
+  __device__ unsigned group_ballot(bool p) const {
+    const unsigned b = __ballot_sync(mask(), p);
+    if constexpr (W == 32) return b;
+    else return (b >> base()) & ((1u << W) - 1u);
+  }
+  __device__ float sum(float x) const {
+    for (int o = W / 2; o > 0; o >>= 1) x += __shfl_xor_sync(mask(), x, o, W);
+    return x;
+  }
+  template <int D>
+  __device__ Vec<D> sum(Vec<D> v) const {
+    for (int k = 0; k < D; ++k) v[k] = sum(v[k]);
+    return v;
+  }
+  __device__ bool leader() const { return lane() == 0; }
+
+  template <int D, class Visitor>
+  __device__ int for_each_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
+                                   Visitor& visit) const {
+    int count = 0;
+    for (int b = begin; b < end; b += W) {
+      const int j = b + lane();
+      bool hit = false;
+      if (j < end) {
+        Vec<D> d = xi - pos[j];
+        float r2 = norm2(d);
+        hit = r2 < r2max;
+        if (hit) visit(j, d, r2);
+      }
+      count += __popc(group_ballot(hit));
+    }
+    return count;
+  }
+
+  template <int D, class Visitor>
+  __device__ void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                  Visitor& visit) const {
+    for (int e = lane(); e < count; e += W) {
+      const int j = list[e];
+      Vec<D> d = xi - pos[j];
+      visit(j, d, norm2(d));
+    }
+  }
+
+  template <int D, class Visitor>
+  __device__ int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                            Visitor& visit, float r2max, int* out, int cap) const {
+    const unsigned below = (1u << lane()) - 1u;
+    int kept = 0;
+    for (int b = 0; b < count; b += W) {
+      const int e = b + lane();
+      bool near = false;
+      if (e < count) {
+        const int j = list[e];
+        Vec<D> d = xi - pos[j];
+        float r2 = norm2(d);
+        visit(j, d, r2);
+        near = r2 < r2max;
+      }
+      const unsigned m = group_ballot(near);
+      if (near) {
+        const int at = kept + __popc(m & below);
+        if (at < cap) out[at] = list[e];
+      }
+      kept += __popc(m);
+    }
+    return kept;
+  }
+
+  // the cell walk in WarpLanes' order (the stencil's cells of the fluid layer, then of the
+  // ghost layer; ascending index in each), up to cap listed
+  template <int D, class Visitor>
+  __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
+                                           int* list, int cap) const {
+    const int nslots = kStencil<D> * (ghosts ? 2 : 1);
+    int c[D];
+    g.spec.cell_of(xi, c);
+    const unsigned below = (1u << lane()) - 1u;
+    int count = 0;
+    for (int k = 0; k < nslots; ++k) {
+      uint32_t slot;
+      if (!stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) continue;
+      const uint32_t s = g.cell_start[slot], e = g.cell_end[slot];
+      for (uint32_t b = s; b < e; b += uint32_t(W)) {
+        const uint32_t j = b + uint32_t(lane());
+        Vec<D> d = Vec<D>::zero();
+        float r2 = 0.0f;
+        bool hit = false;
+        if (j < e) {
+          d = xi - g.pos[j];
+          r2 = norm2(d);
+          hit = r2 < g.spec.h2;
+        }
+        const unsigned m = group_ballot(hit);
+        if (hit) {
+          const int at = count + __popc(m & below);
+          if (at < cap) list[at] = int(j);
+          visit(int(j), d, r2);
+        }
+        count += __popc(m);
+      }
+    }
+    return count;
+  }
+};
 #endif
 
 }  // namespace cps
