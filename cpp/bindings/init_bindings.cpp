@@ -6,7 +6,6 @@
 #include <cmath>
 
 #include "corpuscle/core/quat.h"
-#include "corpuscle/physics/rigid.h"
 #include "init/poisson_disk.h"
 
 namespace nb = nanobind;
@@ -19,22 +18,16 @@ void bind_init(nb::module_& m) {
          std::array<float, 4> box_q, float clearance, uint64_t seed) {
         if (!(radius > 0.0f)) throw nb::value_error("radius must be positive");
         if (count < 1) throw nb::value_error("count must be positive");
-        Vec3 c{{box_center[0], box_center[1], box_center[2]}};
-        Vec3 half{{box_half[0], box_half[1], box_half[2]}};
-        Quat q = qnormalize(Quat{box_q[0], box_q[1], box_q[2], box_q[3]});
         // inside the sphere and at least `clearance` outside the box
-        auto inside = [&](const Vec3& p) {
-          if (norm2(p) > radius * radius) return false;
-          Vec3 n;
-          return box_sdf(half, qrotate_inv(q, p - c), n) >= clearance;
-        };
-        double box_vol = 8.0 * double(half[0]) * half[1] * half[2];
-        double volume = 4.0 / 3.0 * M_PI * double(radius) * radius * radius - box_vol;
+        SphereMinusBox region{radius, Vec3{{box_center[0], box_center[1], box_center[2]}},
+                              Vec3{{box_half[0], box_half[1], box_half[2]}},
+                              qnormalize(Quat{box_q[0], box_q[1], box_q[2], box_q[3]}), clearance};
         float r_used = 0.0f;
         std::vector<Vec3> pts;
         {
+          // parallel over the OpenMP threads; the points do not depend on their number
           nb::gil_scoped_release release;
-          pts = poisson_disk_count(radius, count, inside, volume, seed, &r_used);
+          pts = poisson_disk_count(region, count, seed, &r_used);
         }
         auto* data = new float[pts.size() * 3];
         for (size_t i = 0; i < pts.size(); ++i)
