@@ -106,6 +106,8 @@ import pkgutil
 from dataclasses import dataclass, field
 from typing import Any
 
+import math
+
 import numpy as np
 
 from .. import scene as _scene
@@ -300,6 +302,12 @@ def count(name: str, value, minimum: int = 0) -> int:
 
 def finite_vector(name: str, value, length: int = 3) -> list[float]:
     """`length` finite numbers."""
+    # the common case, a tuple or list of Python numbers, without NumPy (set every step)
+    if type(value) in (tuple, list) and len(value) == length and all(type(x) in (float, int) for x in value):
+        out = [float(x) for x in value]
+        if all(math.isfinite(x) for x in out):
+            return out
+        raise ValueError(f"{name} must be finite, got {out}")
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):

@@ -54,6 +54,7 @@ class SimImpl final : public Sim {
     if (halted(r0)) return 0;
     const long long first = r0.clock.step;
     const int batch = Exec::on_device ? kPollBatch : 1;
+    flush_control();
     int slot = 0;
     bool pending = false;
     rec_valid_ = false;
@@ -87,6 +88,7 @@ class SimImpl final : public Sim {
       r.clock.done = r.clock.bad = 0;
       write_record(r);
     }
+    flush_control();
     p_.prepare();
     ex_.launch_step(-1, [&] { p_.enqueue(false); });
     p_.advance(false);
@@ -122,10 +124,12 @@ class SimImpl final : public Sim {
     write_record(r);
   }
 
+  // staged on the host; the next step (or evaluation) uploads it once, asynchronously and
+  // ordered before its first stage
   void set_control(const std::string& name, const void* bytes) override {
     const ScalarInfo& s = find(controls_, name, "control");
     std::memcpy(reinterpret_cast<char*>(&ctl_) + s.offset, bytes, dtype_size(s.dtype) * size_t(s.count));
-    ex_.upload_async(control_.data(), &ctl_, sizeof(Control));  // ordered before the next step
+    ctl_dirty_ = true;
   }
 
   std::vector<std::pair<std::string, double>> derived() override { return p_.derived(record()); }
@@ -181,7 +185,7 @@ class SimImpl final : public Sim {
     if (!s.control.empty()) {
       if (s.control.size() != sizeof(Control)) throw Error(std::string(P::kind) + ": the checkpoint's control has the wrong size");
       std::memcpy(&ctl_, s.control.data(), sizeof(Control));
-      ex_.upload_async(control_.data(), &ctl_, sizeof(Control));
+      ctl_dirty_ = true;
     }
     p_.invalidate(true);
   }
@@ -194,6 +198,7 @@ class SimImpl final : public Sim {
   }
 
   std::vector<std::pair<std::string, double>> profile(long long n) override {
+    flush_control();
     ex_.synchronize();
     ex_.profile_begin();
     for (long long k = 0; k < n; ++k) {
@@ -210,6 +215,11 @@ class SimImpl final : public Sim {
 
  private:
   static bool halted(const Record& r) { return r.clock.done != 0 || r.clock.bad != 0; }
+  void flush_control() {
+    if (!ctl_dirty_) return;
+    ex_.upload_async(control_.data(), &ctl_, sizeof(Control));
+    ctl_dirty_ = false;
+  }
   static Buf<Record> alloc_record(Exec& ex, const Record& initial) {
     Buf<Record> b;
     b.resize(1);
@@ -254,6 +264,7 @@ class SimImpl final : public Sim {
   Record rec_;
   bool rec_valid_ = false;
   Control ctl_;
+  bool ctl_dirty_ = false;
 };
 
 }  // namespace cps
