@@ -215,6 +215,8 @@ def test_api_rejects_bad_arguments():
         sim.step(1.5)
     with pytest.raises(ValueError, match=r"steps must be >= 0, got -1"):
         sim.step(-1)
+    with pytest.raises(ValueError, match=r"until = -1.0 s is before the current time 0.0 s"):
+        sim.run(until=-1)
     with pytest.raises(ValueError, match=r"orientation must be a non-zero quaternion"):
         sim.set_die(orientation=(0, 0, 0, 0))
     with pytest.raises(ValueError, match=r"angular_velocity must be finite"):

@@ -226,6 +226,8 @@ class Simulation:
             until = float(until)
             if not math.isfinite(until):
                 raise ValueError(f"until must be a finite time, got {until!r}")
+            if until < self.time:
+                raise ValueError(f"until = {until!r} s is before the current time {self.time!r} s")
             self.core.set_end_time(until)
         budget = _count("steps", steps) if steps is not None else (None if until is not None else 0)
         chunk = _count("chunk", chunk, minimum=1)
