@@ -4,6 +4,7 @@ Every case here must fail before the compiled core is needed, so the core and th
 simulation module are blocked from importing for the whole file.
 """
 
+import importlib.util
 import os
 import pathlib
 import subprocess
@@ -158,6 +159,8 @@ def test_scenes_lists_builtins(capsys):
     assert main(["scenes", "--keys"]) == 0
     out = capsys.readouterr().out
     assert "fluid.stiffness" in out and "[[shake]]" in out
+    if importlib.util.find_spec("corpuscle._core") is not None:
+        assert "  --neighbors: lists, grid, allpairs (default lists)" in out.splitlines()
 
 
 @pytest.mark.parametrize(

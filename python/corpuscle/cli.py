@@ -224,6 +224,15 @@ def _configure_scenes(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keys", action="store_true", help="also list every key of each scene kind (type, default, unit, range)")
 
 
+def _core_kinds() -> dict[str, list[str]]:
+    """The core's kinds and their index plug-ins ({} when the core is not built)."""
+    try:
+        core = importlib.import_module("corpuscle._core")
+    except ImportError:
+        return {}
+    return {str(k): list(v) for k, v in dict(core.kinds()).items()}
+
+
 def _cmd_scenes(args: argparse.Namespace) -> int:
     # built-in scenes, one a line
     scenes = builtin_scenes()
@@ -237,6 +246,9 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
         kind = registered.schema
         keys = kind.keys
         print(f"\nkind {kind_name}: {kind.description}")
+        indexes = _core_kinds().get(kind_name)
+        if indexes:
+            print(f"  --neighbors: {', '.join(indexes)} (default {indexes[0]})")
         kw = max(len(k) for k in keys)
         for key, spec in keys.items():
             default = json.dumps(spec.default, ensure_ascii=False)
