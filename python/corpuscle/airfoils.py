@@ -46,8 +46,8 @@ _NACA_A = (0.2969, -0.1260, -0.3516, 0.2843)
 _A4_OPEN = -0.1015  # the classic coefficient: a finite trailing-edge thickness (0.00252 for t = 0.12)
 _A4_CLOSED = -0.1036  # the modified one that closes the trailing edge (y_t(1) = 0 to 4 decimals)
 
-_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eEdD][-+]?\d+)?"
-_TWO_NUMBERS = re.compile(rf"^\s*({_NUM})\s*[,;\s]\s*({_NUM})\s*$")
+_NUM = r"[-+]?(?:(?:\d+\.?\d*|\.\d+)(?:[eEdD][-+]?\d+)?|nan|inf(?:inity)?)"  # nan/inf: then "non-finite"
+_TWO_NUMBERS = re.compile(rf"^\s*({_NUM})\s*[,;\s]\s*({_NUM})\s*$", re.IGNORECASE)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -110,15 +110,15 @@ def validate_polygon(polygon, name: str = "polygon") -> np.ndarray:
     if np.any(same):
         i = int(np.argmax(same))
         raise ValueError(f"{name}: vertices {i} and {(i + 1) % len(p)} coincide at {tuple(p[i])}")
+    hit = _first_self_intersection(p)
+    if hit is not None:
+        raise ValueError(f"{name}: the polygon intersects itself (edges {hit[0]} and {hit[1]})")
     area = signed_area(p)
     if not area > 0:
         raise ValueError(
             f"{name}: the polygon is {'clockwise' if area < 0 else 'degenerate (zero area)'}; "
             "it must be counter-clockwise"
         )
-    hit = _first_self_intersection(p)
-    if hit is not None:
-        raise ValueError(f"{name}: the polygon intersects itself (edges {hit[0]} and {hit[1]})")
     return p
 
 
