@@ -194,7 +194,11 @@ CPS_HD CPS_INLINE PolygonHit polygon_sdf(const Poly& P, const Vec2& p) {
   int v = bt <= 0.0f ? bi : (bi + 1 == n ? 0 : bi + 1);
   h.vertex = v;
   h.closest = bt <= 0.0f ? Vec2{{g.ax, g.ay}} : Vec2{{g.bx, g.by}};
+  // the distance to the vertex from p - v itself (the edge loop's (p - a) - t (b - a) loses
+  // the low bits of a short distance to a far vertex)
   Vec2 d = p - h.closest;
+  dist = norm(d);
+  h.distance = in ? -dist : dist;
   float scale = fmax2(fmax2(h.closest[0] < 0.0f ? -h.closest[0] : h.closest[0],
                             h.closest[1] < 0.0f ? -h.closest[1] : h.closest[1]), 1e-30f);
   if (dist > 1e-6f * scale) {
