@@ -64,7 +64,7 @@ def test_e398_shipped_closed_ccw_unit_chord_le_at_origin():
     assert (np.all(p == 0.0, axis=1)).sum() == 1  # the leading edge vertex at the origin
     np.testing.assert_allclose(p[0], (1.0, 0.0), atol=1e-12)  # the trailing edge
     assert p[:, 0].min() >= -1e-9 and p[:, 0].max() <= 1 + 1e-12
-    # Eppler 398: about 15.3 % thick, the upper surface up to y = 0.12
+    # Eppler 398 as in the file: the upper surface reaches y = 0.12, the lower y = -0.033
     assert 0.11 < p[:, 1].max() < 0.13 and -0.04 < p[:, 1].min() < -0.03
 
 
