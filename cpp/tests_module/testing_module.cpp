@@ -14,6 +14,8 @@
 #include <optional>
 #include <tuple>
 
+#include "corpuscle/physics/dem.h"
+#include "corpuscle/physics/polygon.h"
 #include "cpu/exec_cpu.h"
 #include "testing_ops.h"
 
@@ -154,6 +156,41 @@ nb::dict spec_dict(const std::vector<float>& lo, const std::vector<float>& hi, f
   return d;
 }
 
+
+// ---- polygon and DEM contact (physics/polygon.h, physics/dem.h), host only ----
+std::vector<float> points2(const Array& a, const char* what) {
+  if (a.ndim() != 2 || a.shape(1) != 2) throw nb::value_error((std::string(what) + " must have shape (n, 2)").c_str());
+  return vec<float>(a, what);
+}
+template <int D>
+Vec<D> row(const std::vector<float>& a, size_t i) {
+  Vec<D> r;
+  for (int k = 0; k < D; ++k) r[k] = a[D * i + k];
+  return r;
+}
+template <int D>
+nb::tuple pair_forces_d(float k, float c, const std::vector<float>& xi, const std::vector<float>& vi,
+                        const std::vector<float>& ri, const std::vector<float>& xj, const std::vector<float>& vj,
+                        const std::vector<float>& rj) {
+  size_t m = ri.size();
+  std::vector<float> fi(D * m), fj(D * m), mag(m), magj(m);
+  std::vector<uint8_t> touch(m);
+  SpringDashpot law{k, c};
+  for (size_t i = 0; i < m; ++i) {
+    Vec<D> f, g;
+    float a, b;
+    bool t = pair_contact_force<D>(law, row<D>(xi, i), row<D>(vi, i), ri[i], row<D>(xj, i), row<D>(vj, i), rj[i], f, a);
+    bool u = pair_contact_force<D>(law, row<D>(xj, i), row<D>(vj, i), rj[i], row<D>(xi, i), row<D>(vi, i), ri[i], g, b);
+    for (int q = 0; q < D; ++q) {
+      fi[D * i + q] = f[q];
+      fj[D * i + q] = g[q];
+    }
+    mag[i] = a;
+    magj[i] = b;
+    touch[i] = uint8_t(t) | uint8_t(u) << 1;
+  }
+  return nb::make_tuple(np(fi, D), np(fj, D), np(mag), np(magj), np(touch));
+}
 }  // namespace
 
 NB_MODULE(_testing, m) {
@@ -380,4 +417,115 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
       nb::arg("tags") = nb::none(), nb::arg("ntags") = 1);
+  // ---- polygon signed distance and DEM contacts ----
+  m.def(
+      "polygon_sdf",
+      [](const Array& vertices, const Array& points, const std::string& layout) {
+        std::vector<float> xy = points2(vertices, "vertices"), p = points2(points, "points");
+        int n = int(xy.size() / 2);
+        if (n < 3) throw nb::value_error("a polygon needs at least 3 vertices");
+        PolygonVertices V{xy.data(), n};
+        std::vector<float> edges(size_t(kEdgeStride) * n);
+        polygon_write_edges(V, edges.data());
+        PolygonEdges E{edges.data(), n};
+        if (layout != "vertices" && layout != "edges") throw nb::value_error("layout must be vertices or edges");
+        size_t m = p.size() / 2;
+        std::vector<float> d(m), nrm(2 * m), q(2 * m);
+        std::vector<int32_t> edge(m), vertex(m);
+        std::vector<uint8_t> inside(m);
+        for (size_t i = 0; i < m; ++i) {
+          Vec2 x{{p[2 * i], p[2 * i + 1]}};
+          PolygonHit h = layout == "edges" ? polygon_sdf(E, x) : polygon_sdf(V, x);
+          d[i] = h.distance;
+          nrm[2 * i] = h.normal[0];
+          nrm[2 * i + 1] = h.normal[1];
+          q[2 * i] = h.closest[0];
+          q[2 * i + 1] = h.closest[1];
+          edge[i] = h.edge;
+          vertex[i] = h.vertex;
+          inside[i] = layout == "edges" ? polygon_contains(E, x) : polygon_contains(V, x);
+        }
+        nb::dict r;
+        r["distance"] = np(d);
+        r["normal"] = np(nrm, 2);
+        r["closest"] = np(q, 2);
+        r["edge"] = np(edge);
+        r["vertex"] = np(vertex);
+        r["inside"] = np(inside);
+        return r;
+      },
+      nb::arg("vertices"), nb::arg("points"), nb::arg("layout") = "vertices",
+      "Signed distance (negative inside), outward normal, closest point and feature of each point "
+      "(float32 (m, 2)) against the counter-clockwise polygon (float32 (n, 2)).");
+  m.def(
+      "polygon_edges",
+      [](const Array& vertices) {
+        std::vector<float> xy = points2(vertices, "vertices");
+        int n = int(xy.size() / 2);
+        std::vector<float> edges(size_t(kEdgeStride) * n);
+        polygon_write_edges(PolygonVertices{xy.data(), n}, edges.data());
+        Box2 b = polygon_bbox(PolygonVertices{xy.data(), n});
+        return nb::make_tuple(np(edges, kEdgeStride), nb::make_tuple(b.lo[0], b.lo[1], b.hi[0], b.hi[1]));
+      },
+      nb::arg("vertices"), "The flat edge records (n, kEdgeStride) and the bounding box (xlo, ylo, xhi, yhi).");
+  m.def(
+      "dem_law",
+      [](float k, float c, float m1, float m2) {
+        SpringDashpot law{k, c};
+        float me = effective_mass(m1, m2);
+        nb::dict r;
+        r["m_eff"] = me;
+        r["zeta"] = damping_ratio(law, me);
+        r["restitution"] = restitution_from_damping(law, me);
+        r["contact_time"] = contact_time(law, me);
+        return r;
+      },
+      nb::arg("k"), nb::arg("c"), nb::arg("m1"), nb::arg("m2") = 0.0f,
+      "Effective mass, damping ratio, restitution and contact time of the spring-dashpot law (m2 <= 0: a wall).");
+  m.def(
+      "dem_damping",
+      [](float k, float e, float m1, float m2) { return damping_from_restitution(k, e, effective_mass(m1, m2)); },
+      nb::arg("k"), nb::arg("e"), nb::arg("m1"), nb::arg("m2") = 0.0f, "The damping c giving restitution e.");
+  m.def(
+      "dem_pair_forces",
+      [](float k, float c, const Array& xi, const Array& vi, const Array& ri, const Array& xj, const Array& vj,
+         const Array& rj) {
+        if (xi.ndim() != 2 || (xi.shape(1) != 2 && xi.shape(1) != 3))
+          throw nb::value_error("positions must have shape (m, 2) or (m, 3)");
+        int D = int(xi.shape(1));
+        auto a = vec<float>(xi, "xi"), b = vec<float>(vi, "vi"), e = vec<float>(xj, "xj"), f = vec<float>(vj, "vj");
+        auto r1 = vec<float>(ri, "ri"), r2 = vec<float>(rj, "rj");
+        size_t m = xi.shape(0);
+        if (b.size() != D * m || e.size() != D * m || f.size() != D * m || r1.size() != m || r2.size() != m)
+          throw nb::value_error("dem_pair_forces: inconsistent shapes");
+        return D == 2 ? pair_forces_d<2>(k, c, a, b, r1, e, f, r2) : pair_forces_d<3>(k, c, a, b, r1, e, f, r2);
+      },
+      nb::arg("k"), nb::arg("c"), nb::arg("xi"), nb::arg("vi"), nb::arg("ri"), nb::arg("xj"), nb::arg("vj"),
+      nb::arg("rj"),
+      "Per pair, each computed both ways (i from j, j from i): the force on i, the force on j, |F| for i and for j, "
+      "and touch flags (bit 0: i's call, bit 1: j's call).");
+  m.def(
+      "dem_polygon_forces",
+      [](float k, float c, const Array& vertices, const Array& x, const Array& v, float r) {
+        std::vector<float> xy = points2(vertices, "vertices"), p = points2(x, "x"), u = points2(v, "v");
+        if (u.size() != p.size()) throw nb::value_error("x and v: one row per particle");
+        int n = int(xy.size() / 2);
+        PolygonVertices V{xy.data(), n};
+        SpringDashpot law{k, c};
+        size_t m = p.size() / 2;
+        std::vector<float> f(2 * m), mag(m), sd(m);
+        std::vector<uint8_t> touch(m);
+        for (size_t i = 0; i < m; ++i) {
+          Vec2 g;
+          PolygonHit h;
+          touch[i] = polygon_contact_force(law, V, Vec2{{p[2 * i], p[2 * i + 1]}}, Vec2{{u[2 * i], u[2 * i + 1]}}, r,
+                                           g, mag[i], h);
+          f[2 * i] = g[0];
+          f[2 * i + 1] = g[1];
+          sd[i] = h.distance;
+        }
+        return nb::make_tuple(np(f, 2), np(mag), np(touch), np(sd));
+      },
+      nb::arg("k"), nb::arg("c"), nb::arg("vertices"), nb::arg("x"), nb::arg("v"), nb::arg("radius"),
+      "Per particle against the resting polygon: force on the particle, |F|, contact, signed distance.");
 }
