@@ -156,6 +156,8 @@ nb::dict spec_dict(const std::vector<float>& lo, const std::vector<float>& hi, f
 
 }  // namespace
 
+void bind_sph(nb::module_& m);  // testing_sph.cpp: SPH kernel families and pair terms
+
 NB_MODULE(_testing, m) {
   m.doc() = "corpuscle engine internals for the tests: exec primitives and spatial indexes on each backend";
   // cps::Error (bad arguments, a grid past its cell limit, a missing device) is a ValueError,
@@ -380,4 +382,6 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
       nb::arg("tags") = nb::none(), nb::arg("ntags") = 1);
+
+  bind_sph(m);
 }
