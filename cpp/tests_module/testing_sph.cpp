@@ -63,14 +63,13 @@ Vec<D> row(const FArray& a, size_t i) {
 
 // W, grad W (D) and, for the viscosity kernel, lap W (NaN for the others)
 template <int D, SphKernelKind K>
-void eval_static(float h, const FArray& d, size_t n, std::vector<float>& out) {
+void eval_static(float h, const FArray& d, size_t n, bool from_r2, std::vector<float>& out) {
   auto k = Kernel<D, K>::make(h);
   for (size_t i = 0; i < n; ++i) {
     Vec<D> v = row<D>(d, i);
     float r = norm(v);
     float* o = out.data() + i * (D + 2);
-    if constexpr (K == SphKernelKind::Poly6) o[0] = KernelFormula<D, K>::w_r2(k.k, norm2(v));
-    else o[0] = k.w(r);
+    o[0] = from_r2 ? k.w_r2(norm2(v)) : k.w(r);
     Vec<D> g = k.grad(v, r);
     for (int c = 0; c < D; ++c) o[1 + c] = g[c];
     if constexpr (K == SphKernelKind::Viscosity) o[D + 1] = KernelFormula<D, K>::lap(k.k, r);
@@ -79,16 +78,16 @@ void eval_static(float h, const FArray& d, size_t n, std::vector<float>& out) {
 }
 
 template <int D>
-nb::ndarray<nb::numpy, float> eval_kernel(SphKernelKind kind, float h, const FArray& d, bool compile_time) {
+nb::ndarray<nb::numpy, float> eval_kernel(SphKernelKind kind, float h, const FArray& d, bool compile_time, bool from_r2) {
   size_t n = rows(d, D, "d");
   std::vector<float> out(n * (D + 2));
   if (compile_time) {
     switch (kind) {
-      case SphKernelKind::Poly6: eval_static<D, SphKernelKind::Poly6>(h, d, n, out); break;
-      case SphKernelKind::Spiky: eval_static<D, SphKernelKind::Spiky>(h, d, n, out); break;
-      case SphKernelKind::Viscosity: eval_static<D, SphKernelKind::Viscosity>(h, d, n, out); break;
-      case SphKernelKind::CubicSpline: eval_static<D, SphKernelKind::CubicSpline>(h, d, n, out); break;
-      default: eval_static<D, SphKernelKind::WendlandC2>(h, d, n, out); break;
+      case SphKernelKind::Poly6: eval_static<D, SphKernelKind::Poly6>(h, d, n, from_r2, out); break;
+      case SphKernelKind::Spiky: eval_static<D, SphKernelKind::Spiky>(h, d, n, from_r2, out); break;
+      case SphKernelKind::Viscosity: eval_static<D, SphKernelKind::Viscosity>(h, d, n, from_r2, out); break;
+      case SphKernelKind::CubicSpline: eval_static<D, SphKernelKind::CubicSpline>(h, d, n, from_r2, out); break;
+      default: eval_static<D, SphKernelKind::WendlandC2>(h, d, n, from_r2, out); break;
     }
   } else {
     auto k = SphKernel<D>::make(kind, h);
@@ -96,7 +95,7 @@ nb::ndarray<nb::numpy, float> eval_kernel(SphKernelKind kind, float h, const FAr
       Vec<D> v = row<D>(d, i);
       float r = norm(v);
       float* o = out.data() + i * (D + 2);
-      o[0] = k.w(r);
+      o[0] = from_r2 ? k.w_r2(norm2(v)) : k.w(r);
       Vec<D> g = k.grad(v, r);
       for (int c = 0; c < D; ++c) o[1 + c] = g[c];
       o[D + 1] = kind == SphKernelKind::Viscosity ? KernelFormula<D, SphKernelKind::Viscosity>::lap(k.k, r)
@@ -227,13 +226,15 @@ auto by_dim(int dim, F f) {
 void bind_sph(nb::module_& m) {
   m.def(
       "sph_kernel",
-      [](const std::string& kernel, int dim, float h, const FArray& d, bool compile_time) {
+      [](const std::string& kernel, int dim, float h, const FArray& d, bool compile_time, bool from_r2) {
         auto kind = kernel_kind(kernel);
-        return by_dim(dim, [&](auto D) { return eval_kernel<decltype(D)::value>(kind, h, d, compile_time); });
+        return by_dim(dim,
+                      [&](auto D) { return eval_kernel<decltype(D)::value>(kind, h, d, compile_time, from_r2); });
       },
       nb::arg("kernel"), nb::arg("dim"), nb::arg("h"), nb::arg("d"), nb::arg("compile_time") = false,
+      nb::arg("from_r2") = false,
       "Columns: W(|d|), grad_i W(d) (dim), lap W (viscosity kernel only, else NaN); h is the support radius. "
-      "compile_time: Kernel<D, K> instead of the run-time SphKernel<D>.");
+      "compile_time: Kernel<D, K> instead of the run-time SphKernel<D>; from_r2: W via w_r2(|d|^2).");
   m.def(
       "sph_monaghan_pi",
       [](int dim, float alpha, float beta, float hs, const FArray& d, const FArray& dv, const FArray& c_bar,

@@ -13,7 +13,7 @@
 //               had a typo in this constant; sph_kernels.h and this file use the correct one.)
 //   Spiky       W = c (h - r)^3                     c3 = 15 / (pi h^6),      c2 = 10 / (pi h^5)
 //               (Mueller 2003, eq. 21; 2-D: int_0^h (h - r)^3 2 pi r dr = pi h^5 / 10)
-//   Viscosity   3-D: W = c (-r^3 / 2h^3 + r^2 / h^2 + h / 2r - 1), c = 15 / (2 pi h^3),
+//   Viscosity   3-D: W = c (-r^3 / 2h^3 + r^2 / h^2 + h / 2r - 1) = c (1 - q)^3 (1 + q) / 2q, c = 15 / (2 pi h^3),
 //               lap W = 45 / (pi h^6) (h - r) (Mueller 2003, eq. 22).
 //               2-D: the radial kernel whose 2-D Laplacian is k (h - r) with W(h) = W'(h) = 0,
 //               normalised over the disc: W = k (h r^2 / 4 - r^3 / 9 - 5 h^3 / 36 - h^3 / 6 ln(r/h)),
@@ -137,15 +137,24 @@ struct KernelFormula<D, SphKernelKind::Viscosity> {
     }
     return k;
   }
+  // both written without the cancellation of their published sums near r = h
   CPS_HD static float w(const SphKernelConsts& k, float r) {
     if (r >= k.h || r <= 0.0f) return 0.0f;
-    float h = k.h;
+    float q = r / k.h, e = 1.0f - q;
     if constexpr (D == 3) {
-      float q = r / h;
-      return k.c * (q * q * (1.0f - 0.5f * q) + 0.5f / q - 1.0f);
+      // -q^3/2 + q^2 + 1/(2q) - 1 = (1 - q)^3 (1 + q) / (2 q)
+      return k.c * e * e * e * (1.0f + q) / (2.0f * q);
     } else {
-      return k.c * (h * r * r * 0.25f - r * r * r * (1.0f / 9.0f) - h * k.h2 * (5.0f / 36.0f) -
-                    h * k.h2 * (1.0f / 6.0f) * sph_detail::flog(r / h));
+      // h^3 f(q), f = q^2/4 - q^3/9 - 5/36 - ln(q)/6 = (e^3 + sum_{n>=4} e^n / n) / 6, e = 1 - q:
+      // the series for e < 0.4 (terms to n = 20: relative truncation < 1e-7), the sum beyond
+      float h3 = k.h2 * k.h;
+      if (e < 0.4f) {
+        float s = 1.0f / 20.0f;
+        for (int n = 19; n >= 4; --n) s = s * e + 1.0f / float(n);
+        float e3 = e * e * e;
+        return k.c * h3 * (e3 * (1.0f + e * s)) * (1.0f / 6.0f);
+      }
+      return k.c * h3 * (q * q * (0.25f - q * (1.0f / 9.0f)) - 5.0f / 36.0f - sph_detail::flog(q) * (1.0f / 6.0f));
     }
   }
   // 3-D: grad W = -c (h - r)^2 (h^2 + 2 h r + 3 r^2) / (2 h^3 r^3) d
@@ -228,6 +237,11 @@ struct Kernel {
   CPS_HD static Kernel make(float h) { return Kernel{F::make(h)}; }
   CPS_HD float support() const { return k.h; }
   CPS_HD float w(float r) const { return F::w(k, r); }
+  // W from the squared distance (Poly6 needs no square root)
+  CPS_HD float w_r2(float r2) const {
+    if constexpr (K == SphKernelKind::Poly6) return F::w_r2(k, r2);
+    else return F::w(k, fsqrt(r2));
+  }
   CPS_HD Vec<D> grad(const Vec<D>& d, float r) const { return F::grad(k, d, r); }
 };
 
@@ -258,6 +272,11 @@ struct SphKernel {
       case SphKernelKind::CubicSpline: return KernelFormula<D, SphKernelKind::CubicSpline>::w(k, r);
       default: return KernelFormula<D, SphKernelKind::WendlandC2>::w(k, r);
     }
+  }
+  // W from the squared distance (Poly6 needs no square root)
+  CPS_HD float w_r2(float r2) const {
+    if (kind == SphKernelKind::Poly6) return KernelFormula<D, SphKernelKind::Poly6>::w_r2(k, r2);
+    return w(fsqrt(r2));
   }
   CPS_HD Vec<D> grad(const Vec<D>& d, float r) const {
     switch (kind) {
