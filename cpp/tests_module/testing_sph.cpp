@@ -200,11 +200,10 @@ nb::ndarray<nb::numpy, float> density_diffusion(SphKernelKind kind, float h, con
 }
 
 template <int D>
-nb::ndarray<nb::numpy, float> pairwise(const FArray& d, const FArray& dv, std::size_t n_expect, bool pi,
+nb::ndarray<nb::numpy, float> pairwise(const FArray& d, const FArray& dv, bool pi,
                                        float alpha, float beta, float hs, const FArray* cbar, const FArray* rhobar) {
   size_t n = rows(d, D, "d");
   if (rows(dv, D, "dv") != n) throw nb::value_error("d and dv: the same number of rows");
-  (void)n_expect;
   std::vector<float> out(n);
   auto p = ArtificialViscosity::make(alpha, beta, hs);
   for (size_t i = 0; i < n; ++i) {
@@ -242,7 +241,7 @@ void bind_sph(nb::module_& m) {
         check_len(c_bar, d.shape(0), "c_bar");
         check_len(rho_bar, d.shape(0), "rho_bar");
         return by_dim(dim, [&](auto D) {
-          return pairwise<decltype(D)::value>(d, dv, 0, true, alpha, beta, hs, &c_bar, &rho_bar);
+          return pairwise<decltype(D)::value>(d, dv, true, alpha, beta, hs, &c_bar, &rho_bar);
         });
       },
       nb::arg("dim"), nb::arg("alpha"), nb::arg("beta"), nb::arg("hs"), nb::arg("d"), nb::arg("dv"),
@@ -251,7 +250,7 @@ void bind_sph(nb::module_& m) {
       "sph_mu",
       [](int dim, float hs, const FArray& d, const FArray& dv) {
         return by_dim(dim, [&](auto D) {
-          return pairwise<decltype(D)::value>(d, dv, 0, false, 0.0f, 0.0f, hs, nullptr, nullptr);
+          return pairwise<decltype(D)::value>(d, dv, false, 0.0f, 0.0f, hs, nullptr, nullptr);
         });
       },
       nb::arg("dim"), nb::arg("hs"), nb::arg("d"), nb::arg("dv"), "mu_ij = hs v_ij . r_ij / (r^2 + 0.01 hs^2) per row.");
