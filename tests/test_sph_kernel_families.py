@@ -55,7 +55,7 @@ def w_ref(kernel, dim, h, r):
             k = 40.0 / (math.pi * h**5)
             w = k * (h * rs**2 / 4 - rs**3 / 9 - 5 * h**3 / 36 - h**3 / 6 * np.log(rs / h))
         w = np.where(r > 0, w, 0.0)
-    elif kernel == "cubic_spline":  # Monaghan 1992 eq. 2.6, smoothing length s = h / 2, support 2 s
+    elif kernel == "cubic_spline":  # Monaghan 1992 (M4 spline), smoothing length s = h / 2, support 2 s
         s = h / 2
         sigma = (1.0 / math.pi if dim == 3 else 10.0 / (7.0 * math.pi)) / s**dim
         x = r / s

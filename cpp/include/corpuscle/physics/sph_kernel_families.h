@@ -21,7 +21,7 @@
 //               Both are singular (integrably) at r = 0; W(0) returns 0 there by convention.
 //   CubicSpline W = sigma / h^D f(q), f = 1 - 6 q^2 + 6 q^3 (q < 1/2), 2 (1 - q)^3 (1/2 <= q < 1),
 //               sigma3 = 8 / pi, sigma2 = 40 / (7 pi)
-//               (Monaghan & Lattanzio 1985; Monaghan 1992, eq. 2.6 with s = h / 2: 1/pi and
+//               (Monaghan & Lattanzio 1985; Monaghan 1992, the M4 spline with s = h / 2: 1/pi and
 //               10/(7 pi) times 2^D; = Dehnen & Aly 2012, Table 1, 16/pi and 80/(7 pi) times their
 //               (1 - q)^3 - 4 (1/2 - q)^3 = f / 2)
 //   WendlandC2  W = C / h^D (1 - q)^4 (1 + 4 q),   C3 = 21 / (2 pi), C2 = 7 / pi
