@@ -193,6 +193,8 @@ nb::tuple pair_forces_d(float k, float c, const std::vector<float>& xi, const st
 }
 }  // namespace
 
+void bind_sph(nb::module_& m);  // testing_sph.cpp: SPH kernel families and pair terms
+
 NB_MODULE(_testing, m) {
   m.doc() = "corpuscle engine internals for the tests: exec primitives and spatial indexes on each backend";
   // cps::Error (bad arguments, a grid past its cell limit, a missing device) is a ValueError,
@@ -528,4 +530,6 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("k"), nb::arg("c"), nb::arg("vertices"), nb::arg("x"), nb::arg("v"), nb::arg("radius"),
       "Per particle against the resting polygon: force on the particle, |F|, contact, signed distance.");
+
+  bind_sph(m);
 }

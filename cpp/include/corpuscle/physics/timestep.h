@@ -23,3 +23,23 @@ CPS_HD CPS_INLINE float choose_dt(const DtParams& p, float h, float vmax, float 
 }
 
 }  // namespace cps
+
+namespace cps {
+
+// The CFL form of DualSPHysics (Monaghan & Kos 1999; Crespo et al. 2015, DualSPHysics paper):
+//   dt = C min(dt_f, dt_cv),  dt_f = min_i sqrt(hs / |a_i|) = sqrt(hs / amax),
+//   dt_cv = min_i hs / (c0 + max_j |mu_ij|) = hs / (c0 + mu_max),
+// with mu_ij = hs v_ij . r_ij / (r_ij^2 + eta^2) (sph_mu in physics/sph_pair_terms.h; mu_max is
+// the largest |mu_ij| over all pairs), hs the smoothing length (not the support radius), c0 the
+// (largest) sound speed. choose_dt's acoustic limit h / (c0 + vmax) bounds the same thing by
+// the largest speed instead of the pair term. Clamped to [dt_min, dt_max] as choose_dt is.
+CPS_HD CPS_INLINE float choose_dt_cfl(float cfl, float hs, float amax, float c0, float mu_max, float dt_min,
+                                      float dt_max) {
+  float dt = hs / (c0 + mu_max);
+  if (amax > 0.0f) dt = fmin2(dt, fsqrt(hs / amax));
+  dt *= cfl;
+  if (!finite(dt)) dt = dt_min;
+  return fclamp(dt, dt_min, dt_max);
+}
+
+}  // namespace cps

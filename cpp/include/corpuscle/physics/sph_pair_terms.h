@@ -1,0 +1,135 @@
+// Pair terms of weakly compressible SPH (the DualSPHysics set): Monaghan's artificial
+// viscosity, the laminar viscosity of Morris et al. / Lo & Shao, and delta-SPH density
+// diffusion (Molteni & Colagrossi 2009; Fourtakas et al. 2019). Each function gives the
+// contribution of neighbour j to particle i, for
+//   d  = x_i - x_j (r_ij),  r2 = |d|^2,  dv = v_i - v_j (v_ij),  gradW = grad_i W(d) (the
+//   gradient kernel of sph_kernel_families.h, or any other, evaluated at d),
+// so the pair (j, i) is the same call with d, dv and gradW negated and i, j swapped.
+//
+// Smoothing length: these formulas were published with a smoothing length hs (Monaghan's h,
+// DualSPHysics's h) in mu_ij, eta^2 = 0.01 hs^2 and the diffusion's delta hs c0. That is NOT the
+// support radius h of the kernels here: pass hs explicitly (for the cubic spline and Wendland
+// with support 2 hs, hs = h / 2; DualSPHysics's dam break uses hs = 1.732 dp, support 2 hs).
+//
+// Conservation (tests/test_sph_pair_terms.py checks each):
+//   - the viscosities give m_i a_ij = -m_j a_ji exactly in exact arithmetic (momentum): their
+//     scalar factors are symmetric in (i, j) and multiply an antisymmetric vector;
+//   - the density diffusion gives V_i D_ij = -V_j D_ji (V = m / rho), so sum_i V_i drho_i/dt
+//     = 0: the hydrostatic correction is taken as an odd function of z_ij (see below).
+#pragma once
+#include "corpuscle/core/vec.h"
+
+namespace cps {
+
+// mu_ij = hs v_ij . r_ij / (r_ij^2 + eta^2) (Monaghan 1992, section 4); |mu_ij| is also the
+// pair's speed in the DualSPHysics CFL limit dt_cv (physics/timestep.h, choose_dt_cfl)
+template <int D>
+CPS_HD CPS_INLINE float sph_mu(float hs, float eta2, const Vec<D>& d, const Vec<D>& dv, float r2) {
+  return hs * dot(dv, d) / (r2 + eta2);
+}
+
+// ---- Monaghan artificial viscosity (Monaghan 1992, section 4; Monaghan & Gingold 1983) ----
+//   Pi_ij = (-alpha cbar_ij mu_ij + beta mu_ij^2) / rhobar_ij  if v_ij . r_ij < 0, else 0
+//   cbar = (c_i + c_j) / 2, rhobar = (rho_i + rho_j) / 2, eta^2 = 0.01 hs^2
+//   a_i += -m_j Pi_ij grad_i W_ij
+// Pi_ij >= 0 for approaching pairs, so the pair force is repulsive along r_ij and its power
+// -m_i m_j Pi_ij v_ij . grad_i W_ij is <= 0 (dissipative). DualSPHysics: beta = 0.
+struct ArtificialViscosity {
+  float alpha, beta, hs, eta2;
+  CPS_HD static ArtificialViscosity make(float alpha, float beta, float hs) {
+    return ArtificialViscosity{alpha, beta, hs, 0.01f * hs * hs};
+  }
+};
+
+template <int D>
+CPS_HD CPS_INLINE float monaghan_pi(const ArtificialViscosity& p, const Vec<D>& d, const Vec<D>& dv, float r2,
+                                    float c_bar, float rho_bar) {
+  float vr = dot(dv, d);
+  if (vr >= 0.0f) return 0.0f;  // receding (or sliding past): no viscosity
+  float mu = p.hs * vr / (r2 + p.eta2);
+  return (-p.alpha * c_bar * mu + p.beta * mu * mu) / rho_bar;
+}
+
+template <int D>
+CPS_HD CPS_INLINE Vec<D> artificial_viscosity_acc(const ArtificialViscosity& p, const Vec<D>& d, const Vec<D>& dv,
+                                                  float r2, float c_i, float c_j, float rho_i, float rho_j,
+                                                  float m_j, const Vec<D>& gradW) {
+  float pi = monaghan_pi(p, d, dv, r2, 0.5f * (c_i + c_j), 0.5f * (rho_i + rho_j));
+  return gradW * (-m_j * pi);
+}
+
+// ---- laminar viscosity (Morris, Fox & Zhu 1997, in the form of Lo & Shao 2002 that
+// DualSPHysics calls "laminar": Dominguez et al. 2022, Comput. Part. Mech.) ----
+//   a_i += m_j 4 nu0 (r_ij . grad_i W_ij) / ((rho_i + rho_j)(r_ij^2 + eta^2)) v_ij
+// nu0: kinematic viscosity (m^2/s); eta^2 = 0.01 hs^2. Morris's (mu_i + mu_j) / (rho_i rho_j)
+// becomes 4 nu0 / (rho_i + rho_j) for a uniform nu0 (equal at rho_i = rho_j).
+// r_ij . grad W <= 0, so i is pulled towards j's velocity (dissipative).
+struct LaminarViscosity {
+  float nu0, eta2;
+  CPS_HD static LaminarViscosity make(float nu0, float hs) { return LaminarViscosity{nu0, 0.01f * hs * hs}; }
+};
+
+template <int D>
+CPS_HD CPS_INLINE Vec<D> laminar_viscosity_acc(const LaminarViscosity& p, const Vec<D>& d, const Vec<D>& dv,
+                                               float r2, float rho_i, float rho_j, float m_j, const Vec<D>& gradW) {
+  float s = m_j * 4.0f * p.nu0 * dot(d, gradW) / ((rho_i + rho_j) * (r2 + p.eta2));
+  return dv * s;
+}
+
+// ---- density diffusion (delta-SPH) ----
+//   drho_i/dt += 2 delta hs c0 ((rho_j - rho_i) - rho^H_ji) (r_ji . grad_i W_ij) / (r_ij^2 + eta^2) V_j
+//   V_j = m_j / rho_j, r_ji = -d, eta^2 = 0.01 hs^2.
+// Molteni & Colagrossi 2009 (with r_ij^2 regularised by eta^2 as DualSPHysics does):
+//   rho^H_ji = 0.
+// Fourtakas et al. 2019 (Comput. Fluids 190; DualSPHysics's "DDT2"): rho^H_ji is the
+// hydrostatic density difference of the pair, from the Tait equation with B = c0^2 rho0 / gamma,
+//   rho^H_ji = rho0 ((1 + kz z_ij)^(1/gamma) - 1),  kz = rho0 g / B = gamma g / c0^2,
+// with z_ij = z_i - z_j (z the last axis, gravity g > 0 along -z): positive when j is below i.
+// That published form is not odd in z_ij, so the (i, j) and (j, i) terms would not cancel
+// (mass would drift at O((kz z)^2)); here rho^H_ji is its odd part,
+//   rho^H_ji = rho0 / 2 ((1 + kz z_ij)^(1/gamma) - (1 - kz z_ij)^(1/gamma)),
+// which agrees with the published form to first order in kz z (and with it, the exact Tait
+// hydrostatic difference is cancelled to O((kz z)^2); kz z ~ 1e-3 at the dam break's spacing).
+// fourtakas_rho_h_published() gives the published form for comparison.
+enum class DensityDiffusionKind : int { None = 0, Molteni = 1, Fourtakas = 2 };
+
+struct DensityDiffusion {
+  DensityDiffusionKind kind;
+  float coeff;      // 2 delta hs c0
+  float eta2;       // 0.01 hs^2
+  float rho0;       // rest density (Fourtakas)
+  float gamma_inv;  // 1 / gamma (Fourtakas)
+  float kz;         // rho0 g / B = gamma g / c0^2 (Fourtakas)
+
+  CPS_HD static DensityDiffusion none() { return DensityDiffusion{DensityDiffusionKind::None, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f}; }
+  CPS_HD static DensityDiffusion molteni(float delta, float hs, float c0) {
+    return DensityDiffusion{DensityDiffusionKind::Molteni, 2.0f * delta * hs * c0, 0.01f * hs * hs, 0.0f, 1.0f, 0.0f};
+  }
+  CPS_HD static DensityDiffusion fourtakas(float delta, float hs, float c0, float rho0, float gamma, float g) {
+    return DensityDiffusion{DensityDiffusionKind::Fourtakas, 2.0f * delta * hs * c0, 0.01f * hs * hs, rho0,
+                            1.0f / gamma, gamma * g / (c0 * c0)};
+  }
+};
+
+// the published hydrostatic difference rho^H_ji = rho0 ((1 + kz z_ij)^(1/gamma) - 1)
+CPS_HD CPS_INLINE float fourtakas_rho_h_published(const DensityDiffusion& p, float z_ij) {
+  return p.rho0 * (fpow(fmax2(1.0f + p.kz * z_ij, 0.0f), p.gamma_inv) - 1.0f);
+}
+// its odd part, the one used: rho0 / 2 ((1 + kz z)^(1/gamma) - (1 - kz z)^(1/gamma))
+CPS_HD CPS_INLINE float fourtakas_rho_h(const DensityDiffusion& p, float z_ij) {
+  float up = fpow(fmax2(1.0f + p.kz * z_ij, 0.0f), p.gamma_inv);
+  float dn = fpow(fmax2(1.0f - p.kz * z_ij, 0.0f), p.gamma_inv);
+  return 0.5f * p.rho0 * (up - dn);
+}
+
+template <int D>
+CPS_HD CPS_INLINE float density_diffusion_rate(const DensityDiffusion& p, const Vec<D>& d, float r2, float rho_i,
+                                               float rho_j, float m_j, const Vec<D>& gradW) {
+  if (p.kind == DensityDiffusionKind::None) return 0.0f;
+  float drho = rho_j - rho_i;
+  if (p.kind == DensityDiffusionKind::Fourtakas) drho -= fourtakas_rho_h(p, d[D - 1]);
+  // r_ji . grad_i W_ij = -d . gradW >= 0
+  return p.coeff * drho * (-dot(d, gradW)) / (r2 + p.eta2) * (m_j / rho_j);
+}
+
+}  // namespace cps
