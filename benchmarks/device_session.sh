@@ -44,6 +44,11 @@ for b in cuda cpu; do
 done
 say 2M start-up, new
 corpuscle run magic8ball --backend cuda --particles 2000000 --steps 20 --every 10 --out /tmp/big.cps --json | tee -a "$log"
+corpuscle bench magic8ball --backend cuda --particles 2000000 --steps 20 --repeats 3 --no-progress | tee -a "$log"
+say CLI against bench, new, three times
+for k in 1 2 3; do
+  corpuscle run magic8ball --backend cuda --out /tmp/n.cps --json | python3 -c "import json,sys; d=json.load(sys.stdin); print('cli', round(d['steps_per_second']))" | tee -a "$log"
+done
 say resume on cuda
 corpuscle run magic8ball --backend cuda --steps 600 --every 100 --checkpoint-every 200 --velocity --out /tmp/r1.cps --json > /dev/null
 cp /tmp/r1.cps /tmp/r2.cps
