@@ -209,6 +209,7 @@ class LiveServer:
         app.router.add_get("/", self._page)
         app.router.add_get("/ws", self._websocket)
         app.router.add_get("/static/{name}", self._static)
+        app.router.add_get("/favicon.ico", lambda request: web.Response(status=204))
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port, reuse_address=False)
