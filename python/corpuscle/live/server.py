@@ -90,7 +90,7 @@ class LiveServer:
         self.controls = dict(controls or {})
         self.source = source
         self.frames = frames
-        self.log = log or (lambda line: print(f"corpuscle: live: {line}", file=sys.stderr, flush=True))
+        self.log = log if log is not None else (lambda line: print(f"corpuscle: live: {line}", file=sys.stderr, flush=True))
         self.rejected = 0           # messages rejected (tests read it)
         self.accepted = 0
         self.published = 0
@@ -209,7 +209,7 @@ class LiveServer:
         app.router.add_get("/", self._page)
         app.router.add_get("/ws", self._websocket)
         app.router.add_get("/static/{name}", self._static)
-        app.router.add_get("/favicon.ico", lambda request: web.Response(status=204))
+        app.router.add_get("/favicon.ico", self._no_content)
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port, reuse_address=False)
@@ -269,6 +269,10 @@ class LiveServer:
             return web.Response(status=403, text="403: this viewer needs the token printed with its URL\n")
         return web.Response(body=_static_bytes("index.html"), content_type="text/html",
                             headers={"Content-Security-Policy": CSP, "Cache-Control": "no-store"})
+
+    async def _no_content(self, request):
+        web, _ = _import_aiohttp()
+        return web.Response(status=204)
 
     async def _static(self, request):
         web, _ = _import_aiohttp()
