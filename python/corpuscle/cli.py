@@ -17,6 +17,7 @@ import argparse
 import contextlib
 import datetime as _dt
 import importlib
+import importlib.util
 import json
 import math
 import os
@@ -360,6 +361,50 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
     from . import render  # light: heavy imaging libraries load only when rendering
 
     render.add_live_render_arguments(p)
+    _add_live_arguments(p, "--live: ")
+    p.add_argument("--live", action="store_true",
+                   help="also serve a live view of the run at http://127.0.0.1:PORT/ (WebGL2 page; shake the "
+                        "8-ball from the keyboard, pause, resume); needs pip install \".[viewer]\"")
+
+
+def _add_live_arguments(p: argparse.ArgumentParser, what: str = "") -> None:
+    p.add_argument("--port", metavar="P", help=f"{what}the viewer's port (default: 8765; 0 picks a free one)")
+    p.add_argument("--host", metavar="H",
+                   help=f"{what}the address to listen on (default: 127.0.0.1, this machine only; any other "
+                        "needs the random token printed with the URL)")
+
+
+def _live_options(args: argparse.Namespace, needs_live: bool) -> None:
+    """Check --port and --host (and that the viewer's server library is installed)."""
+    if needs_live and not getattr(args, "live", False):
+        for option in ("port", "host"):
+            if getattr(args, option, None) is not None:
+                raise UsageError(f"--{option} is an option of the live view; add --live")
+        return
+    port = _int_option("--port", args.port if args.port is not None else "8765", minimum=0)
+    if port > 65535:
+        raise UsageError(f"--port must be at most 65535, got {port}")
+    args.port = port
+    host = "127.0.0.1" if args.host is None else args.host.strip()
+    if not host or any(c.isspace() or c in "/?#@" for c in host):
+        raise UsageError(f"--host {args.host!r}: not a host name or address")
+    import socket
+
+    try:
+        socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError, OSError) as exc:
+        raise UsageError(f"--host {host}: not an address to listen on ({_one_line(exc)})") from None
+    args.host = host
+    if importlib.util.find_spec("aiohttp") is None:
+        raise UsageError('the live viewer needs aiohttp: pip install "corpuscle[viewer]" (or ".[viewer]" '
+                         'from a checkout)')
+
+
+def _live_url_message(server, what: str) -> str:
+    text = f"{what} at {server.url} (Ctrl-C stops)"
+    if server.token:
+        text += "; the token in the URL is required: this address may be reachable from other machines"
+    return text
 
 
 @dataclass
@@ -404,6 +449,7 @@ def _run_prepare(args: argparse.Namespace) -> _RunPlan:
     args.every = _int_option("--every", args.every, minimum=1)
     ckpt = _int_option("--checkpoint-every", args.checkpoint_every, minimum=1)
     args.device = _int_option("--device", args.device, minimum=0)
+    _live_options(args, needs_live=True)
     if args.resume:
         if args.time is not None and not args.time > 0:
             raise UsageError(f"--time must be a positive number of seconds, got {args.time:g}")
@@ -594,6 +640,27 @@ def _record(sink, sim, args: argparse.Namespace, live, kind: str = "frame") -> N
     if live is not None:
         from types import SimpleNamespace
         live.add_frame(SimpleNamespace(**rec, time=sim.time, step=sim.steps))
+    viewer = getattr(args, "_viewer", None)  # --live: the page gets the latest frame (never waited for)
+    if viewer is not None:
+        try:
+            viewer.publish(sim, rec)
+        except Exception as exc:  # noqa: BLE001 - the viewer never stops a run
+            _err(f"live: frame not published: {_one_line(exc)}")
+
+
+def _start_viewer(args: argparse.Namespace, sim, header: dict[str, Any]):
+    """`run --live`: the viewer's server, started (its URL printed on stderr), or None."""
+    args._viewer = None
+    if not getattr(args, "live", False):
+        return None
+    live = importlib.import_module("corpuscle.live")
+    try:
+        viewer = live.RunViewer.start(sim, header, host=args.host, port=args.port)
+    except live.ServerError as exc:
+        raise UsageError(f"--live: {_one_line(exc)}") from None
+    _err(_live_url_message(viewer.server, "live view"))
+    args._viewer = viewer
+    return viewer
 
 
 def _open_writer(io, plan: _RunPlan, header: dict[str, Any]):
@@ -630,8 +697,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     init_seconds = time.perf_counter() - t_init
     backend = str(getattr(sim, "backend", args.backend))
     header = _run_header(plan, sim, backend, args)
-    live = _live_render(args, header)
-    writer = _open_writer(io, plan, header)
+    viewer = _start_viewer(args, sim, header)
+    try:
+        live = _live_render(args, header)
+        writer = _open_writer(io, plan, header)
+    except BaseException:
+        if viewer is not None:
+            viewer.close()
+        raise
 
     frames = 0
     last_recorded = start_steps
@@ -656,6 +729,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     _record(sink, sim, args, live, kind_at(start_steps, False))
                 # advance to each multiple of K steps, record, check health
                 while True:
+                    if viewer is not None:
+                        viewer.between_chunks(sim)  # the page's control; waits while it paused the run
                     now = int(sim.steps)
                     left = None if plan.end_step is None else plan.end_step - now
                     if (left is not None and left <= 0) or sim.time >= plan.end_time:
@@ -700,6 +775,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     progress.close()
                     if live is not None:
                         live.close()
+                    if viewer is not None:
+                        viewer.close()
+                        args._viewer = None
     except OSError as exc:
         # the writer cut the file back to its last whole frame
         write_error = f"cannot write {out}: {exc.strerror or _one_line(exc)}"
@@ -805,6 +883,44 @@ def _print_run_summary(s: dict[str, Any], scene) -> None:
 
 
 register(Command("run", "run a scene and record it to a frame stream", _configure_run, _cmd_run))
+
+
+# ---------------------------------------------------------------------------
+# corpuscle view
+# ---------------------------------------------------------------------------
+
+
+def _configure_view(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run", metavar="RUN.cps", help="a recorded run")
+    _add_live_arguments(p)
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    _live_options(args, needs_live=False)
+    path = pathlib.Path(args.run)
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file")
+    live = importlib.import_module("corpuscle.live")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a torn tail: its whole frames are shown
+        try:
+            server, run = live.serve_recording(path, host=args.host, port=args.port)
+        except live.ServerError as exc:
+            raise UsageError(f"view: {_one_line(exc)}") from None
+    _err(_live_url_message(server, f"viewing {path} ({len(run)} frames)"))
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+        run.close()
+    return EXIT_OK
+
+
+register(Command("view", "serve a recorded run to a web page (play, pause, scrub, speed)", _configure_view,
+                 _cmd_view))
 
 
 # ---------------------------------------------------------------------------
