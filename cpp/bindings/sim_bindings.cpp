@@ -243,6 +243,7 @@ void bind_sim(nb::module_& m) {
       .def_prop_ro("on_device", [](PySim& s) { return s.sim->on_device(); })
       .def_prop_ro("device", [](PySim& s) { return s.sim->device(); })
       .def_prop_ro("n_particles", [](PySim& s) { return s.sim->particles(); })
+      .def_prop_ro("n_scenes", [](PySim& s) { return s.sim->scenes(); })
       .def("step", [](PySim& s, long long n) {
              SignalCheck check;
              long long taken = 0;
@@ -258,40 +259,42 @@ void bind_sim(nb::module_& m) {
       .def("evaluate", [](PySim& s) { s.sim->evaluate(); },
            "Compute the pair stages and reductions for the current state without advancing.")
       .def("set_end_time", [](PySim& s, double t) { s.sim->set_end_time(t); }, nb::arg("t"))
-      .def("scalars", [](PySim& s) {
-             const unsigned char* rec = s.sim->scene_record();
+      .def("scalars", [](PySim& s, int scene) {
+             const unsigned char* rec = s.sim->scene_record(scene);
              nb::dict d;
              for (const ScalarInfo& x : s.sim->scalars()) d[x.name.c_str()] = scalar_value(x, rec);
-             for (const auto& [k, v] : s.sim->derived()) d[k.c_str()] = v;
+             for (const auto& [k, v] : s.sim->derived(scene)) d[k.c_str()] = v;
              return d;
-           }, "The scalars of the per-scene record as of the last step, and the values the kind derives.")
-      .def("set_scalar", [](PySim& s, const std::string& name, nb::handle value) {
+           }, nb::arg("scene") = 0,
+           "The scalars of a scene's record as of the last step, and the values the kind derives.")
+      .def("set_scalar", [](PySim& s, const std::string& name, nb::handle value, int scene) {
              for (const ScalarInfo& x : s.sim->scalars())
                if (x.name == name) {
                  auto b = scalar_bytes(x, value);
-                 s.sim->set_scalar(name, b.data());
+                 s.sim->set_scalar(name, b.data(), scene);
                  return;
                }
              throw nb::key_error(("unknown scalar '" + name + "'").c_str());
-           }, nb::arg("name"), nb::arg("value"))
+           }, nb::arg("name"), nb::arg("value"), nb::arg("scene") = 0)
       .def("controls", [](PySim& s) {
              nb::dict d;
              for (const ScalarInfo& x : s.sim->controls()) d[x.name.c_str()] = x.count;
              return d;
            }, "Control inputs -> number of values.")
-      .def("set_control", [](PySim& s, nb::dict values) {
+      .def("set_control", [](PySim& s, nb::dict values, int scene) {
              for (auto [k, v] : values) {
                std::string name = nb::cast<std::string>(k);
                bool found = false;
                for (const ScalarInfo& x : s.sim->controls())
                  if (x.name == name) {
                    auto b = scalar_bytes(x, v);
-                   s.sim->set_control(name, b.data());
+                   s.sim->set_control(name, b.data(), scene);
                    found = true;
                  }
                if (!found) throw nb::key_error(("unknown control '" + name + "'").c_str());
              }
-           }, nb::arg("values"), "Set control inputs (name -> values) for the next steps; asynchronous, no rebuild.")
+           }, nb::arg("values"), nb::arg("scene") = -1,
+           "Set control inputs (name -> values) of a scene (-1: every scene) for the next steps; no rebuild.")
       .def("fields", [](PySim& s) {
              nb::list l;
              for (const FieldInfo& f : s.sim->fields()) {
@@ -334,6 +337,7 @@ void bind_sim(nb::module_& m) {
              s.sim->upload(name, a.data(), (long long)(a.nbytes() / item));
            }, nb::arg("name"), nb::arg("values"), "Replace a field's values (host array of the field's dtype).")
       .def("checkpoint", [](PySim& s) {
+             if (s.sim->scenes() != 1) throw nb::value_error("checkpoints of a batch of scenes are not supported yet");
              Snapshot snap = s.sim->checkpoint();
              nb::dict d;
              for (auto& [name, bytes] : snap.fields) {
@@ -348,9 +352,10 @@ void bind_sim(nb::module_& m) {
              return d;
            }, "The state the next step reads: checkpointed fields (current order) and scalars; the next step relists.")
       .def("restore", [](PySim& s, nb::dict d) {
+             if (s.sim->scenes() != 1) throw nb::value_error("checkpoints of a batch of scenes are not supported yet");
              Snapshot snap;
              // start from the current record (keeps what a checkpoint does not hold: the end time)
-             const unsigned char* rec = s.sim->scene_record();
+             const unsigned char* rec = s.sim->scene_record(0);
              snap.scene.assign(rec, rec + s.sim->record_size());
              for (const ScalarInfo& x : s.sim->scalars()) {
                if (!x.checkpointed) continue;

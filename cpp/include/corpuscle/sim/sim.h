@@ -20,8 +20,8 @@ using StopCheck = std::function<bool()>;
 // current particle order) and the checkpointed scalars (the per-scene record's bytes)
 struct Snapshot {
   std::vector<std::pair<std::string, std::vector<unsigned char>>> fields;
-  std::vector<unsigned char> scene;    // the per-scene record (sim/table.h's Clock first)
-  std::vector<unsigned char> control;  // the control the next step reads
+  std::vector<unsigned char> scene;    // the per-scene records (each sim/table.h's Clock first)
+  std::vector<unsigned char> control;  // the controls the next step reads
 };
 
 class Sim {
@@ -33,6 +33,8 @@ class Sim {
   virtual bool on_device() const = 0;
   virtual int device() const = 0;
   virtual long long particles() const = 0;
+  // independent scenes in this state (a single run: 1); per-scene calls name one
+  virtual int scenes() const = 0;
 
   // the kind's tables
   virtual const std::vector<FieldInfo>& fields() const = 0;
@@ -48,15 +50,16 @@ class Sim {
 
   // the per-scene record (Clock first, then the kind's scalars) as of the last step: one
   // copy per call on a device, cached until something changes it
-  virtual const unsigned char* scene_record() = 0;
+  virtual const unsigned char* scene_record(int scene) = 0;
   virtual size_t record_size() const = 0;
   virtual size_t control_size() const = 0;
   // replace scalars of the record (name -> bytes as the table describes them)
-  virtual void set_scalar(const std::string& name, const void* bytes) = 0;
+  virtual void set_scalar(const std::string& name, const void* bytes, int scene) = 0;
   // the control read by the next step: own buffer, written asynchronously, no rebuild
-  virtual void set_control(const std::string& name, const void* bytes) = 0;
+  // (scene -1: every scene)
+  virtual void set_control(const std::string& name, const void* bytes, int scene) = 0;
   // named values the kind derives from its record (the 8-ball's answer face, ...)
-  virtual std::vector<std::pair<std::string, double>> derived() = 0;
+  virtual std::vector<std::pair<std::string, double>> derived(int scene) = 0;
 
   // current storage of a field (host or device) and its item count / a host copy
   virtual std::pair<void*, long long> view(const std::string& name) = 0;

@@ -27,14 +27,17 @@ class SimImpl final : public Sim {
   using Control = typename P::ControlRecord;
   static constexpr int kPollBatch = 32;  // steps between record snapshots on a device
 
+  // `initial` holds one record per scene of the state (a single run: one)
   template <class Model>
-  SimImpl(Exec ex, const Model& m, const Record& initial, int device)
+  SimImpl(Exec ex, const Model& m, const std::vector<Record>& initial, int device)
       : ex_(std::move(ex)), device_(device), record_(alloc_record(ex_, initial)),
-        control_(alloc_control(ex_)), p_(ex_, m, record_.data(), control_.data()),
+        control_(alloc_control(initial.size())), p_(ex_, m, record_.data(), control_.data()),
         fields_(P::field_table()), scalars_(P::scalar_table()), controls_(P::control_table()) {
+    if (int(initial.size()) != p_.scenes()) throw Error(std::string(P::kind) + ": one initial record per scene");
     rec_ = initial;
     rec_valid_ = true;
-    std::memset(&ctl_, 0, sizeof(Control));
+    ctl_.assign(initial.size(), Control{});
+    std::memset(ctl_.data(), 0, sizeof(Control) * ctl_.size());
   }
 
   const char* kind() const override { return P::kind; }
@@ -43,6 +46,7 @@ class SimImpl final : public Sim {
   bool on_device() const override { return Exec::on_device; }
   int device() const override { return device_; }
   long long particles() const override { return p_.particles(); }
+  int scenes() const override { return p_.scenes(); }
   const std::vector<FieldInfo>& fields() const override { return fields_; }
   const std::vector<ScalarInfo>& scalars() const override { return scalars_; }
   const std::vector<ScalarInfo>& controls() const override { return controls_; }
@@ -50,9 +54,9 @@ class SimImpl final : public Sim {
 
   long long step(long long n, const StopCheck& stop) override {
     if (n <= 0) return 0;
-    const Record r0 = record();
-    if (halted(r0)) return 0;
-    const long long first = r0.clock.step;
+    if (all_halted(records().data())) return 0;
+    std::vector<long long> first;
+    for (const Record& r : rec_) first.push_back(r.clock.step);
     const int batch = Exec::on_device ? kPollBatch : 1;
     flush_control();
     int slot = 0;
@@ -66,27 +70,32 @@ class SimImpl final : public Sim {
         p_.advance(true);
       }
       k += b;
-      ex_.poll_begin(slot, record_.data(), sizeof(Record));
+      ex_.poll_begin(slot, record_.data(), sizeof(Record) * rec_.size());
       if (pending || !Exec::on_device) {
         const int seen = Exec::on_device ? slot ^ 1 : slot;
-        if (halted(*static_cast<const Record*>(ex_.poll_wait(seen)))) break;
+        if (all_halted(static_cast<const Record*>(ex_.poll_wait(seen)))) break;
       }
       pending = true;
       slot ^= 1;
       if (stop && stop()) break;
     }
-    return record().clock.step - first;
+    // the steps taken: those of the scene that took the most
+    long long taken = 0;
+    const auto& r = records();
+    for (size_t k = 0; k < r.size(); ++k) taken = std::max(taken, r[k].clock.step - first[k]);
+    return taken;
   }
 
   void evaluate() override {
     // the same stages as a step, without integration. A finished or unsound run is
     // evaluated too: its flags are lifted for the evaluation
-    Record r0 = record();
-    const bool lift = halted(r0);
+    const std::vector<Record> r0 = records();
+    bool lift = false;
+    for (const Record& r : r0) lift = lift || halted(r);
     if (lift) {
-      Record r = r0;
-      r.clock.done = r.clock.bad = 0;
-      write_record(r);
+      std::vector<Record> r = r0;
+      for (Record& x : r) x.clock.done = x.clock.bad = 0;
+      write_records(r);
     }
     flush_control();
     p_.prepare();
@@ -94,53 +103,63 @@ class SimImpl final : public Sim {
     p_.advance(false);
     rec_valid_ = false;
     if (lift) {
-      Record r = record();
-      r.clock.done = r0.clock.done;
-      r.clock.bad = r0.clock.bad;
-      write_record(r);
+      std::vector<Record> r = records();
+      for (size_t k = 0; k < r.size(); ++k) {
+        r[k].clock.done = r0[k].clock.done;
+        r[k].clock.bad = r0[k].clock.bad;
+      }
+      write_records(r);
     }
     ex_.synchronize();
   }
 
   void set_end_time(double t) override {
-    Record r = record();
-    r.clock.end_time = t;
-    r.clock.done = r.clock.time >= t ? 1 : 0;
-    write_record(r);
+    std::vector<Record> r = records();
+    for (Record& x : r) {
+      x.clock.end_time = t;
+      x.clock.done = x.clock.time >= t ? 1 : 0;
+    }
+    write_records(r);
   }
 
-  const unsigned char* scene_record() override {
-    record();
-    return reinterpret_cast<const unsigned char*>(&rec_);
+  const unsigned char* scene_record(int scene) override {
+    return reinterpret_cast<const unsigned char*>(&records().at(check_scene(scene)));
   }
 
   size_t record_size() const override { return sizeof(Record); }
   size_t control_size() const override { return sizeof(Control); }
 
-  void set_scalar(const std::string& name, const void* bytes) override {
+  void set_scalar(const std::string& name, const void* bytes, int scene) override {
     const ScalarInfo& s = find(scalars_, name, "scalar");
-    Record r = record();
-    std::memcpy(reinterpret_cast<char*>(&r) + s.offset, bytes, dtype_size(s.dtype) * size_t(s.count));
-    write_record(r);
+    std::vector<Record> r = records();
+    std::memcpy(reinterpret_cast<char*>(&r.at(check_scene(scene))) + s.offset, bytes,
+                dtype_size(s.dtype) * size_t(s.count));
+    write_records(r);
   }
 
   // staged on the host; the next step (or evaluation) uploads it once, asynchronously and
   // ordered before its first stage
-  void set_control(const std::string& name, const void* bytes) override {
+  // scene -1: every scene
+  void set_control(const std::string& name, const void* bytes, int scene) override {
     const ScalarInfo& s = find(controls_, name, "control");
-    std::memcpy(reinterpret_cast<char*>(&ctl_) + s.offset, bytes, dtype_size(s.dtype) * size_t(s.count));
+    for (int k = 0; k < scenes(); ++k) {
+      if (scene >= 0 && k != check_scene(scene)) continue;
+      std::memcpy(reinterpret_cast<char*>(&ctl_[k]) + s.offset, bytes, dtype_size(s.dtype) * size_t(s.count));
+    }
     ctl_dirty_ = true;
   }
 
-  std::vector<std::pair<std::string, double>> derived() override { return p_.derived(record()); }
+  std::vector<std::pair<std::string, double>> derived(int scene) override {
+    return p_.derived(records().at(check_scene(scene)));
+  }
 
   std::pair<void*, long long> view(const std::string& name) override {
     find(fields_, name, "field");
-    return p_.view(name, record());
+    return p_.view(name, records()[0]);
   }
   void download(const std::string& name, void* dst) override {
     const FieldInfo& f = find(fields_, name, "field");
-    auto [ptr, count] = p_.view(name, record());
+    auto [ptr, count] = p_.view(name, records()[0]);
     ex_.synchronize();
     if (count > 0) ex_.to_host(dst, ptr, size_t(count) * size_t(f.components) * dtype_size(f.dtype));
   }
@@ -154,37 +173,42 @@ class SimImpl final : public Sim {
     Snapshot s;
     for (const FieldInfo& f : fields_) {
       if (!f.checkpointed) continue;
-      auto [ptr, count] = p_.view(f.name, record());
+      auto [ptr, count] = p_.view(f.name, records()[0]);
       std::vector<unsigned char> bytes(size_t(count) * size_t(f.components) * dtype_size(f.dtype));
       ex_.synchronize();
       if (!bytes.empty()) ex_.to_host(bytes.data(), ptr, bytes.size());
       s.fields.emplace_back(f.name, std::move(bytes));
     }
-    const Record& r = record();
-    s.scene.assign(reinterpret_cast<const unsigned char*>(&r), reinterpret_cast<const unsigned char*>(&r) + sizeof(r));
-    const unsigned char* u = reinterpret_cast<const unsigned char*>(&ctl_);
-    s.control.assign(u, u + sizeof(Control));
+    const auto& r = records();
+    const unsigned char* rb = reinterpret_cast<const unsigned char*>(r.data());
+    s.scene.assign(rb, rb + sizeof(Record) * r.size());
+    const unsigned char* u = reinterpret_cast<const unsigned char*>(ctl_.data());
+    s.control.assign(u, u + sizeof(Control) * ctl_.size());
     p_.invalidate(false);  // the next step sorts and relists, as a restored state's does
     return s;
   }
 
   void restore(const Snapshot& s) override {
-    if (s.scene.size() != sizeof(Record)) throw Error(std::string(P::kind) + ": the checkpoint's record has the wrong size");
+    if (s.scene.size() != sizeof(Record) * rec_.size())
+      throw Error(std::string(P::kind) + ": the checkpoint's records have the wrong size");
     for (const auto& [name, bytes] : s.fields) {
       const FieldInfo& f = find(fields_, name, "field");
       const size_t item = size_t(f.components) * dtype_size(f.dtype);
       p_.upload(name, bytes.data(), (long long)(bytes.size() / item));
     }
-    Record r;
-    std::memcpy(&r, s.scene.data(), sizeof(Record));
-    r.clock.done = r.clock.time >= r.clock.end_time ? 1 : 0;
-    r.clock.bad = 0;
-    r.clock.bad_step = -1;
-    P::restored(r);
-    write_record(r);
+    std::vector<Record> r(rec_.size());
+    std::memcpy(r.data(), s.scene.data(), sizeof(Record) * r.size());
+    for (Record& x : r) {
+      x.clock.done = x.clock.time >= x.clock.end_time ? 1 : 0;
+      x.clock.bad = 0;
+      x.clock.bad_step = -1;
+      P::restored(x);
+    }
+    write_records(r);
     if (!s.control.empty()) {
-      if (s.control.size() != sizeof(Control)) throw Error(std::string(P::kind) + ": the checkpoint's control has the wrong size");
-      std::memcpy(&ctl_, s.control.data(), sizeof(Control));
+      if (s.control.size() != sizeof(Control) * ctl_.size())
+        throw Error(std::string(P::kind) + ": the checkpoint's control has the wrong size");
+      std::memcpy(ctl_.data(), s.control.data(), sizeof(Control) * ctl_.size());
       ctl_dirty_ = true;
     }
     p_.invalidate(true);
@@ -215,33 +239,43 @@ class SimImpl final : public Sim {
 
  private:
   static bool halted(const Record& r) { return r.clock.done != 0 || r.clock.bad != 0; }
+  bool all_halted(const Record* r) const {
+    for (size_t k = 0; k < rec_.size(); ++k)
+      if (!halted(r[k])) return false;
+    return true;
+  }
+  int check_scene(int scene) const {
+    if (scene < 0 || scene >= scenes())
+      throw Error(std::string(P::kind) + ": scene " + std::to_string(scene) + " out of range (this state has " +
+                  std::to_string(scenes()) + ")");
+    return scene;
+  }
   void flush_control() {
     if (!ctl_dirty_) return;
-    ex_.upload_async(control_.data(), &ctl_, sizeof(Control));
+    ex_.upload_async(control_.data(), ctl_.data(), sizeof(Control) * ctl_.size());
     ctl_dirty_ = false;
   }
-  static Buf<Record> alloc_record(Exec& ex, const Record& initial) {
+  static Buf<Record> alloc_record(Exec& ex, const std::vector<Record>& initial) {
     Buf<Record> b;
-    b.resize(1);
-    ex.to_device(b.data(), &initial, sizeof(Record));
+    b.resize(initial.size());
+    ex.to_device(b.data(), initial.data(), sizeof(Record) * initial.size());
     return b;
   }
-  static Buf<Control> alloc_control(Exec& ex) {
+  static Buf<Control> alloc_control(size_t scenes) {
     Buf<Control> b;
-    b.resize(1);  // zero: no input
-    (void)ex;
+    b.resize(scenes);  // zero: no input
     return b;
   }
-  // the record as of the last step (one copy when it is stale)
-  const Record& record() {
+  // the records as of the last step (one copy when they are stale)
+  const std::vector<Record>& records() {
     if (!rec_valid_) {
-      ex_.to_host(&rec_, record_.data(), sizeof(Record));
+      ex_.to_host(rec_.data(), record_.data(), sizeof(Record) * rec_.size());
       rec_valid_ = true;
     }
     return rec_;
   }
-  void write_record(const Record& r) {
-    ex_.to_device(record_.data(), &r, sizeof(Record));
+  void write_records(const std::vector<Record>& r) {
+    ex_.to_device(record_.data(), r.data(), sizeof(Record) * r.size());
     rec_ = r;
     rec_valid_ = true;
   }
@@ -261,9 +295,9 @@ class SimImpl final : public Sim {
   P p_;
   std::vector<FieldInfo> fields_;
   std::vector<ScalarInfo> scalars_, controls_;
-  Record rec_;
+  std::vector<Record> rec_;
   bool rec_valid_ = false;
-  Control ctl_;
+  std::vector<Control> ctl_;
   bool ctl_dirty_ = false;
 };
 

@@ -14,6 +14,9 @@ namespace cps::m8 {
 inline Model build_model(const ParamSource& p) {
   Model m{};
   m.n_fluid = int(p.integer("n_fluid"));
+  m.n_scenes = p.has("n_scenes") ? int(p.integer("n_scenes")) : 1;
+  if (m.n_scenes < 1 || (long long)m.n_scenes * m.n_fluid > (1LL << 29))
+    throw Error("magic8ball: n_scenes must be at least 1 and n_scenes * n_fluid at most 2^29");
   m.h = p.f("h");
   m.sph.mass = p.f("mass");
   m.sph.rest_density = p.f("rest_density");
@@ -57,31 +60,48 @@ inline Model build_model(const ParamSource& p) {
 
 // the die at the start: position, velocity, orientation (w, x, y, z), angular velocity in
 // the container frame
-inline RigidState initial_die(const ParamSource& p) {
-  auto d = p.table("die_initial");
+inline RigidState die_from(const ParamSource& d) {
   RigidState s;
-  s.x = d->vec3("position");
-  s.v = d->vec3("velocity");
-  auto q = d->numbers("orientation");
+  s.x = d.vec3("position");
+  s.v = d.vec3("velocity");
+  auto q = d.numbers("orientation");
   if (q.size() != 4) throw Error("magic8ball: die_initial.orientation needs 4 numbers");
   s.q = qnormalize(Quat{float(q[0]), float(q[1]), float(q[2]), float(q[3])});
-  s.w_body = qrotate_inv(s.q, d->vec3("angular_velocity"));
+  s.w_body = qrotate_inv(s.q, d.vec3("angular_velocity"));
   return s;
+}
+
+// one initial record per scene: `die_initial` is one table (every scene) or a list of one
+// table per scene
+template <class P>
+std::vector<Scene> initial_records(const ParamSource& p, int scenes) {
+  std::vector<Scene> out;
+  if (p.has("die_initial_scenes")) {
+    auto t = p.tables("die_initial_scenes");
+    if (int(t.size()) != scenes)
+      throw Error("magic8ball: die_initial_scenes needs " + std::to_string(scenes) + " tables");
+    for (auto& d : t) out.push_back(P::initial_record(die_from(*d)));
+  } else {
+    Scene r = P::initial_record(die_from(*p.table("die_initial")));
+    out.assign(size_t(scenes), r);
+  }
+  return out;
 }
 
 template <class Exec, class Index>
 std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
   using P = Pipeline<std::decay_t<Exec>, Index>;
   Model m = build_model(*r.params);
-  auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), m, P::initial_record(initial_die(*r.params)),
-                                                              r.device);
+  auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), m,
+                                                              initial_records<P>(*r.params, m.n_scenes), r.device);
   // the initial particles
   for (const char* name : {"position", "velocity"}) {
     if (!r.arrays || !r.arrays->has(name)) throw Error(std::string("magic8ball: no initial ") + name + " array");
     ArrayView a = r.arrays->get(name);
-    if (a.components != 3 || a.count != m.n_fluid)
-      throw Error(std::string("magic8ball: the initial ") + name + " array must be (" + std::to_string(m.n_fluid) +
-                  ", 3)");
+    const long long n = (long long)m.n_fluid * m.n_scenes;
+    if (a.components != 3 || a.count != n)
+      throw Error(std::string("magic8ball: the initial ") + name + " array must be (" + std::to_string(n) +
+                  ", 3): the scenes' particles one scene after another");
     sim->upload(name, a.data, a.count);
   }
   return sim;

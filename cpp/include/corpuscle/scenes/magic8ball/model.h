@@ -26,7 +26,8 @@ struct ShakeWindow {
 
 // constant per-scene parameters
 struct Model {
-  int n_fluid;           // fluid particles (ghost slots: the same number again)
+  int n_fluid;           // fluid particles of each scene (ghost slots: the same number again)
+  int n_scenes;          // independent scenes of the same model in one state (1: a single run)
   int max_neighbors;     // neighbour list capacity per particle (within the list radius)
   int max_near;          // capacity of the per-step list of neighbours within h
   float list_radius;     // neighbour lists and cells: h (1 + skin)
@@ -118,6 +119,7 @@ struct Arrays {
   float *rho, *prs;
   int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
   uint32_t *keys, *keys_sorted;
+  uint64_t *keys64, *keys64_sorted;  // a batch's segmented keys (several scenes)
   int *idx, *perm;
   int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
   int *ghost_slot;       // sorted fluid index -> its ghost's slot, or -1 (kept between rebuilds)

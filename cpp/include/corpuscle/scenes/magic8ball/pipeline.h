@@ -33,17 +33,18 @@ class Pipeline {
   }
 
   // element counts of the buffers, for the allocation and the estimate before it
-  static size_t list_slots(const Model& m) { return Index::lists ? size_t(m.n_fluid) * size_t(m.max_neighbors) : 0; }
-  static size_t near_slots(const Model& m) { return Index::lists ? size_t(m.n_fluid) * size_t(m.max_near) : 0; }
+  static size_t list_slots(const Model& m) { return Index::lists ? size_t(total_fluid(m)) * size_t(m.max_neighbors) : 0; }
+  static size_t near_slots(const Model& m) { return Index::lists ? size_t(total_fluid(m)) * size_t(m.max_near) : 0; }
   static double bytes_needed(const Model& m) {
-    const double n = m.n_fluid, cap = 2.0 * n;
+    const double n = total_fluid(m), cap = 2.0 * n;
     const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + 2 * sizeof(uint32_t) +
                             2 * sizeof(int);
     const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int);
     const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
-    const double cells = 2.0 * 2.0 * double(m.grid.ncells) * sizeof(uint32_t);
+    const double cells = 2.0 * double(cells_per_scene(m)) * double(m.n_scenes) * sizeof(uint32_t);
     const double sort_scratch = cap * (sizeof(uint32_t) + sizeof(int)) * 2.0;
-    return cap * per_slot + n * per_fluid + lists + cells + sort_scratch;
+    const double batch = m.n_scenes > 1 ? cap * 2.0 * sizeof(uint64_t) + m.n_scenes * sizeof(StepSums) : 0.0;
+    return cap * per_slot + n * per_fluid + lists + cells + sort_scratch + batch;
   }
 
   static std::vector<FieldInfo> field_table() {
@@ -76,8 +77,9 @@ class Pipeline {
   }
 
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u) : ex_(ex), m_(m), g_(g), u_(u) {
-    const int n = m.n_fluid, cap = 2 * n;
-    if (n <= 0) throw Error("magic8ball: no fluid particles");
+    if (m.n_fluid <= 0) throw Error("magic8ball: no fluid particles");
+    if (m.n_scenes <= 0) throw Error("magic8ball: no scenes");
+    const int n = total_fluid(m), cap = 2 * n;
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(Model));
     for (int p = 0; p < 2; ++p) {
@@ -101,9 +103,16 @@ class Pipeline {
     nbr_count_.resize(n);
     near_.resize(near_slots(m));
     near_count_.resize(n);
-    cells_start_.resize(2 * size_t(m.grid.ncells));
-    cells_end_.resize(2 * size_t(m.grid.ncells));
+    cells_start_.resize(cells_per_scene(m) * size_t(m.n_scenes));
+    cells_end_.resize(cells_per_scene(m) * size_t(m.n_scenes));
+    if (m.n_scenes > 1) {
+      keys64_.resize(cap);
+      keys64_sorted_.resize(cap);
+      scene_sums_.resize(m.n_scenes);
+    }
   }
+
+  int scenes() const { return m_.n_scenes; }
 
   // the record of a new scene: the clock at zero, the die as given, the shell at rest
   static Scene initial_record(const RigidState& die) {
@@ -127,7 +136,7 @@ class Pipeline {
     r.step_dt = 0.0f;
   }
 
-  long long particles() const { return m_.n_fluid; }
+  long long particles() const { return total_fluid(m_); }
   const Model& model() const { return m_; }
   int graph_slot() const { return parity_; }
 
@@ -152,16 +161,25 @@ class Pipeline {
   // the step pipeline; parity_ selects the current buffers, the reorder writes the others
   void enqueue(bool integrate) {
     const Model& m = m_;
-    const int n = m.n_fluid, cap = 2 * n;
+    const int n = total_fluid(m), cap = 2 * n, B = m.n_scenes;
     const int cur = parity_, nxt = parity_ ^ 1;
     Model* md = model_.data();
     Scene* g = g_;
     Arrays a = arrays(cur, nxt);
     // 1. keys come from the last step's integration (or prepare)
     // 2. sort by key (when rebuilding), then reorder into the other buffers (ghosts built
-    //    there, cell ranges) or carry the arrays over
-    ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{g},
-                  ReorderStage{md, g, a});
+    //    there, cell ranges) or carry the arrays over; a batch sorts every scene's segments
+    //    at once, each scene that does not rebuild keeping its order
+    if (B == 1) {
+      ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{g},
+                    ReorderStage{md, g, a});
+    } else {
+      ex_.for_each(cap, SelectKeysStage{md, g, a});
+      int seg_bits = 1;
+      while ((1 << seg_bits) < 2 * B) ++seg_bits;
+      ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + seg_bits);
+      ex_.for_each(cap, ReorderStage{md, g, a});
+    }
     ex_.mark(0);
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
@@ -171,25 +189,37 @@ class Pipeline {
     ex_.mark(1);
     // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
-      ex_.for_each_lanes_reduce_then(n, ForceStage<Index>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
-                                     StepSums::identity(), FinalizeStage{md, g});
+      if (B == 1) {
+        ex_.for_each_lanes_reduce_then(n, ForceStage<Index>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
+                                       StepSums::identity(), FinalizeStage{md, g});
+      } else {
+        ex_.for_each_lanes(n, ForceStage<Index>{md, g, s, grid});
+        ex_.for_each(B, SceneReduceStage{md, s.items, scene_sums_.data()});
+        ex_.for_each(B, FinalizeStage{md, g, scene_sums_.data()});
+      }
       ex_.mark(2);
       // 5. integrate, then key the next step
       ex_.for_each(keys_items(m), IntegrateStage{md, g, s});
       ex_.mark(3);
     } else {
       ex_.for_each_lanes(n, ForceStage<Index>{md, g, s, grid});
-      ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+      if (B == 1) {
+        ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+      } else {
+        ex_.for_each(B, SceneReduceStage{md, s.items, scene_sums_.data()});
+        ex_.for_each(B, StoreSumsStage{g, scene_sums_.data()});
+      }
       ex_.mark(2);
     }
   }
 
   // the current storage of a field (before the first step: input order, current buffers)
   std::pair<void*, long long> view(const std::string& name, const Scene& rec) {
-    const int n = m_.n_fluid;
+    const int n = total_fluid(m_);
     const int cur = parity_;
     const int n_ghost = sorted_ ? rec.n_ghost : 0;
-    (void)n_ghost;
+    if (m_.n_scenes > 1 && name.rfind("ghost_", 0) == 0)
+      throw Error("magic8ball: ghost fields of a batch of scenes are not contiguous; read them per scene (not yet)");
 #define CPS_FIELD_VIEW(fname, T, comps, group, ckpt, settable, storage, count) \
   if (name == #fname) return {static_cast<void*>(storage), (long long)(count)};
     CPS_M8_FIELDS(CPS_FIELD_VIEW)
@@ -200,7 +230,7 @@ class Pipeline {
   // replace the fluid's positions or velocities (ids restart at 0..n-1 with positions), or
   // restore a checkpoint's ids; the next step sorts and relists
   void upload(const std::string& name, const void* src, long long count) {
-    const int n = m_.n_fluid;
+    const int n = total_fluid(m_);
     if (count != n) throw Error("magic8ball: " + name + " needs " + std::to_string(n) + " items");
     const int cur = parity_;
     if (name == "position") {
@@ -258,6 +288,8 @@ class Pipeline {
     a.near_count = near_count_.data();
     a.cell_start = cells_start_.data();
     a.cell_end = cells_end_.data();
+    a.keys64 = keys64_.data();
+    a.keys64_sorted = keys64_sorted_.data();
     return a;
   }
 
@@ -276,6 +308,8 @@ class Pipeline {
   Buf<StepSums> items_;
   Buf<int> nbr_, nbr_count_, near_, near_count_;
   Buf<uint32_t> cells_start_, cells_end_;
+  Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort
+  Buf<StepSums> scene_sums_;              // a batch's per-scene reductions
   int parity_ = 0;
   bool sorted_ = false;
   bool keys_ready_ = false;  // the last step's integration keyed the current state

@@ -44,13 +44,30 @@ CPS_HD CPS_INLINE void raise_first(int* p, int code) {
 // carry the arrays over
 CPS_HD CPS_INLINE bool halted(const Scene* g) { return g->clock.done != 0 || g->clock.bad != 0; }
 
-// cell keys of fluid particle i at x and of its ghost slot n + i, with identity values
+// A state holds n_scenes independent scenes of n_fluid particles each. Slots: the fluid of
+// scene s in [s n, (s + 1) n), its ghost slots in [N + s n, N + (s + 1) n) (N = all fluid);
+// its cell table at s * cells_per_scene. A single run is a batch of one (the same layout as
+// ever: fluid in [0, n), ghosts after it).
+CPS_HD CPS_INLINE int total_fluid(const Model& m) { return m.n_fluid * m.n_scenes; }
+CPS_HD CPS_INLINE int scene_of_slot(const Model& m, int j) {
+  const int N = total_fluid(m);
+  return (j < N ? j : j - N) / m.n_fluid;
+}
+CPS_HD CPS_INLINE size_t cells_per_scene(const Model& m) { return 2 * size_t(m.grid.ncells); }
+// the grid of scene s: its own cell table
+CPS_HD CPS_INLINE GridView<D> scene_grid(const Model& m, GridView<D> g, int s) {
+  g.cell_start += size_t(s) * cells_per_scene(m);
+  g.cell_end += size_t(s) * cells_per_scene(m);
+  return g;
+}
+
+// cell keys of fluid particle i at x and of its ghost slot N + i, with identity values
 CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x) {
-  const int n = m.n_fluid;
+  const int N = total_fluid(m);
   a.keys[i] = m.grid.key(x, 0);
-  a.keys[n + i] = needs_ghost(m.wall, x, m.list_radius) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
+  a.keys[N + i] = needs_ghost(m.wall, x, m.list_radius) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
   a.idx[i] = i;
-  a.idx[n + i] = n + i;
+  a.idx[N + i] = N + i;
 }
 
 // this step's container frame from the shake schedule, the API control and the shell state
@@ -65,20 +82,20 @@ CPS_HD CPS_INLINE void prepare_frame(const Model& m, const Control& u, Scene& g)
   g.frame = f;
 }
 
-// items of the keys stage: the larger of the particle count and the cell table
+// items of the keys stage: the larger of the particle count and the cell tables
 CPS_HD CPS_INLINE int keys_items(const Model& m) {
-  int cells = int(2 * m.grid.ncells);
-  return m.n_fluid > cells ? m.n_fluid : cells;
+  int cells = int(cells_per_scene(m) * size_t(m.n_scenes));
+  return total_fluid(m) > cells ? total_fluid(m) : cells;
 }
 
-// the work that starts a step: clear the cell table, key every particle (the container
+// the work that starts a step: clear the cell tables, key every particle (the container
 // frame is set by the step's density stage, from the control as it is then)
 CPS_HD CPS_INLINE void start_step(const Model& m, const Arrays& a, int i, const Vec3* x) {
-  if (uint32_t(i) < 2 * m.grid.ncells) {
+  if (size_t(i) < cells_per_scene(m) * size_t(m.n_scenes)) {
     a.cell_start[i] = 0u;
     a.cell_end[i] = 0u;
   }
-  if (i < m.n_fluid) {
+  if (i < total_fluid(m)) {
     write_keys(m, a, i, *x);
     a.ghost_of[i] = -1;
   }
@@ -91,9 +108,13 @@ struct KeysStage {
   Arrays a;
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
-    Vec3 x = i < m.n_fluid ? a.pos[i] : Vec3::zero();
+    const bool fluid = i < total_fluid(m);
+    Vec3 x = fluid ? a.pos[i] : Vec3::zero();
     start_step(m, a, i, &x);
-    if (i == 0) g->rebuild[g->clock.step & 1] = 1;  // a new state is always sorted and listed
+    if (fluid && i % m.n_fluid == 0) {
+      Scene* gs = g + i / m.n_fluid;
+      gs->rebuild[gs->clock.step & 1] = 1;  // a new state is always sorted and listed
+    }
   }
 };
 
@@ -106,6 +127,29 @@ struct RebuildFlag {
   CPS_HD bool operator()() const { return rebuilding(g); }
 };
 
+// a batch of several scenes sorts 64-bit keys: the segment (fluid or ghosts of one scene)
+// above the cell key; a scene that does not rebuild keeps its order (its slots' own index
+// as the key), so every scene's order is what it would be alone
+struct SelectKeysStage {
+  const Model* model;
+  const Scene* g;
+  Arrays a;
+  CPS_HD void operator()(int j) const {
+    const Model& m = *model;
+    const int N = total_fluid(m), s = scene_of_slot(m, j);
+    const Scene* gs = g + s;
+    const int layer = j < N ? 0 : 1;
+    const int begin = layer * N + s * m.n_fluid;
+    const uint32_t k = rebuilding(gs) && !halted(gs) ? a.keys[j] : uint32_t(j - begin);
+    a.keys64[j] = (uint64_t(layer * m.n_scenes + s) << 32) | uint64_t(k);
+  }
+};
+
+// the sorted cell key of slot j (the low half of a batch's 64-bit key)
+CPS_HD CPS_INLINE uint32_t sorted_key(const Model& m, const Arrays& a, int j) {
+  return m.n_scenes > 1 ? uint32_t(a.keys64_sorted[j]) : a.keys_sorted[j];
+}
+
 // stage 2: gather particle arrays into sorted order, build ghosts, record cell ranges; when
 // not rebuilding, carry the arrays over in their order (ghosts were moved by the integration)
 struct ReorderStage {
@@ -114,33 +158,47 @@ struct ReorderStage {
   Arrays a;
   CPS_HD void operator()(int j) const {
     const Model& m = *model;
-    const int n = m.n_fluid, cap = 2 * n;
-    if (!rebuilding(g) || halted(g)) {
-      if (j < n + g->n_ghost) {
+    const int n = m.n_fluid, N = total_fluid(m), s = scene_of_slot(m, j);
+    Scene* gs = g + s;
+    const bool fluid = j < N;
+    const int begin = (fluid ? 0 : N) + s * n, end = begin + n;  // this slot's segment
+    if (!rebuilding(gs) || halted(gs)) {
+      if (fluid || j - begin < gs->n_ghost) {
         a.pos_alt[j] = a.pos[j];
         a.vel_alt[j] = a.vel[j];
         a.id_alt[j] = a.id[j];
       }
       return;
     }
-    mark_cell_range(m.grid, a.keys_sorted, j, cap, a.cell_start, a.cell_end);
     const uint32_t sentinel = m.grid.sentinel();
-    if (a.keys_sorted[j] >= sentinel) return;
+    const uint32_t k = sorted_key(m, a, j);
+    const bool last = j + 1 == end || sorted_key(m, a, j + 1) != k;
+    if (k < sentinel) {
+      // the cell's range in the scene's table (layer 1: the ghost half)
+      const size_t slot = size_t(s) * cells_per_scene(m) + (k & (m.grid.layer_bit() - 1u)) +
+                          ((k & m.grid.layer_bit()) ? m.grid.ncells : 0u);
+      if (j == begin || sorted_key(m, a, j - 1) != k) a.cell_start[slot] = uint32_t(j);
+      if (last) a.cell_end[slot] = uint32_t(j + 1);
+    }
+    if (k >= sentinel) {
+      if (!fluid && j == begin) gs->n_ghost = 0;  // no ghost in this scene
+      return;
+    }
     int o = a.perm[j];
-    if (o < n) {
+    if (o < N) {
       a.pos_alt[j] = a.pos[o];
       a.vel_alt[j] = a.vel[o];
       a.id_alt[j] = a.id[o];
       a.x_build[j] = a.pos[o];
     } else {
-      int f = o - n;
+      int f = o - N;
       Vec3 x = a.pos[f];
       a.pos_alt[j] = mirror_position(m.wall, x);
       a.vel_alt[j] = mirror_velocity(x, a.vel[f]);
       a.id_alt[j] = -1;
       a.ghost_of[f] = j;
     }
-    if (j + 1 == cap || a.keys_sorted[j + 1] >= sentinel) g->n_ghost = j + 1 - n;
+    if (!fluid && (j + 1 == end || sorted_key(m, a, j + 1) >= sentinel)) gs->n_ghost = j + 1 - begin;
   }
 };
 
@@ -183,8 +241,16 @@ struct PairWalk {
     } else if constexpr (Index::cells) {
       kept = count = L.for_each_neighbor_listing(grid, x, true, v, nullptr, 0);
     } else {
-      kept = count = L.for_each_in_range(grid.pos, 0, m.n_fluid + g->n_ghost, x, m.kern.h2, v);
+      kept = count = all_pairs(m, g, grid, i, x, L, v);
     }
+  }
+  // every fluid particle of i's scene, then its ghosts
+  template <class Lanes, class V>
+  CPS_HD static int all_pairs(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
+                              const Lanes& L, V& v) {
+    const int n = m.n_fluid, s = i / n, ghosts = total_fluid(m) + s * n;
+    return L.for_each_in_range(grid.pos, s * n, s * n + n, x, m.kern.h2, v) +
+           L.for_each_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, m.kern.h2, v);
   }
   template <class Lanes, class V>
   CPS_HD static void forces(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
@@ -196,7 +262,7 @@ struct PairWalk {
     } else if constexpr (Index::cells) {
       L.for_each_neighbor_listing(grid, x, true, fv, nullptr, 0);
     } else {
-      L.for_each_in_range(grid.pos, 0, m.n_fluid + g->n_ghost, x, m.kern.h2, fv);
+      all_pairs(m, g, grid, i, x, L, fv);
     }
   }
 };
@@ -217,32 +283,34 @@ struct DensityStage {
   GridView<D> grid;
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
-    if (halted(g)) return;
     const Model& m = *model;
+    const int s = i / m.n_fluid;
+    Scene* gs = g + s;
+    if (halted(gs)) return;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    const bool rebuild = rebuilding(g);
+    const bool rebuild = rebuilding(gs);
     int count = 0, kept = 0;
-    PairWalk<Index>::density(m, g, a, grid, i, x, L, v, count, kept);
+    PairWalk<Index>::density(m, gs, a, scene_grid(m, grid, s), i, x, L, v, count, kept);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
-    if (i == 0) prepare_frame(m, *ctl, *g);  // read by the force stage and the finalize
+    if (i % m.n_fluid == 0) prepare_frame(m, ctl[s], *gs);  // read by the force stage and the finalize
     if constexpr (Index::lists) {
       a.near_count[i] = kept;
-      if (count > m.max_neighbors || kept > m.max_near) raise_first(&g->clock.bad, kBadNeighbors);
+      if (count > m.max_neighbors || kept > m.max_near) raise_first(&gs->clock.bad, kBadNeighbors);
       if (rebuild) a.nbr_count[i] = count;
     }
     if (rebuild) a.ghost_slot[i] = a.ghost_of[a.perm[i]];
-    float cut = m.kern.box_fraction(m.die.half, qrotate_inv(g->die.q, x - g->die.x));
+    float cut = m.kern.box_fraction(m.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
     float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(m.sph, rho);
     a.rho[i] = rho;
     a.prs[i] = p;
     // the ghost of this particle carries the same density and pressure
-    int gs = a.ghost_slot[i];
-    if (gs >= 0) {
-      a.rho[gs] = rho;
-      a.prs[gs] = p;
+    int ghost = a.ghost_slot[i];
+    if (ghost >= 0) {
+      a.rho[ghost] = rho;
+      a.prs[ghost] = p;
     }
   }
 };
@@ -258,23 +326,25 @@ struct ForceStage {
   GridView<D> grid;
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
-    if (halted(g)) return;  // the reduction of a step not taken is discarded
     const Model& m = *model;
-    ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, m.n_fluid);
+    const int sc = i / m.n_fluid;
+    const Scene* gs = g + sc;
+    if (halted(gs)) return;  // the reduction of a step not taken is discarded
+    ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, total_fluid(m));
     Vec3 x = a.pos[i];
-    PairWalk<Index>::forces(m, g, a, grid, i, x, L, fv);
+    PairWalk<Index>::forces(m, gs, a, scene_grid(m, grid, sc), i, x, L, fv);
     fv.reduce(L);
     if (!L.leader()) return;
     Vec3 v = a.vel[i];
-    Vec3 acc = fv.acceleration() + frame_acceleration(g->frame, x, v);
+    Vec3 acc = fv.acceleration() + frame_acceleration(gs->frame, x, v);
     StepSums s = StepSums::identity();
     // die: contact spring + drag on the particle, reaction on the die
     Vec3 ad;
-    if (body_contact(m.contact, m.die, g->die, x, v, ad)) {
+    if (body_contact(m.contact, m.die, gs->die, x, v, ad)) {
       acc += ad;
       Vec3 F = ad * (-m.sph.mass);
       s.force = F;
-      s.torque = cross(x - g->die.x, F);
+      s.torque = cross(x - gs->die.x, F);
       s.contacts = 1;
     }
     a.acc[i] = acc;
@@ -299,13 +369,43 @@ CPS_HD CPS_INLINE float sums_dt(const Model& m, const StepSums& s, const RigidSt
   return choose_dt(m.dt, m.h, max_speed(s, die), fsqrt(s.amax2), m.c0, m.sph.viscosity / m.sph.rest_density);
 }
 
-// stage 5 (one item per scene): dt, die and container integration, clock
+// a batch's reductions, one scene per item, in the CPU backend's fixed order (kReduceChunks
+// chunks of the scene's items, combined in order): each scene's sums are what it gets alone
+constexpr int kSceneReduceChunks = 64;  // = CpuExec::kReduceChunks
+struct SceneReduceStage {
+  const Model* model;
+  const StepSums* items;
+  StepSums* out;
+  CPS_HD void operator()(int s) const {
+    const int n = model->n_fluid, base = s * n;
+    const int chunk = (n + kSceneReduceChunks - 1) / kSceneReduceChunks;
+    StepSums total = StepSums::identity();
+    for (int c = 0; c < kSceneReduceChunks; ++c) {
+      StepSums part = StepSums::identity();
+      const int b = c * chunk, e = b + chunk < n ? b + chunk : n;
+      for (int k = b; k < e; ++k) part = StepSums::combine(part, items[base + k]);
+      total = StepSums::combine(total, part);
+    }
+    out[s] = total;
+  }
+};
+
+// an evaluation's reductions, kept as the scenes' sums
+struct StoreSumsStage {
+  Scene* g;
+  const StepSums* sums;
+  CPS_HD void operator()(int s) const { g[s].sums = sums[s]; }
+};
+
+// stage 5 (one item per scene): dt, die and container integration, clock; the step's sums
+// are the scene's pending ones, or a batch's from `sums`
 struct FinalizeStage {
   const Model* model;
   Scene* g;
-  CPS_HD void operator()(int) const {
+  const StepSums* sums = nullptr;
+  CPS_HD void operator()(int scene) const {
     const Model& m = *model;
-    Scene& G = *g;
+    Scene& G = g[scene];
     Clock& C = G.clock;
     if (C.done || C.time >= C.end_time) {
       C.done = 1;
@@ -321,7 +421,7 @@ struct FinalizeStage {
     }
     G.rebuilds += G.rebuild[C.step & 1];
     G.rebuild[C.step & 1] = 0;  // this step's readers are done with its flag
-    const StepSums& S = G.pending;
+    const StepSums& S = sums ? sums[scene] : G.pending;
     float dt = sums_dt(m, S, G.die);
     const bool last = C.time + double(dt) >= C.end_time;
     if (last) dt = float(C.end_time - C.time);
@@ -371,25 +471,27 @@ struct IntegrateStage {
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
     Vec3 x = Vec3::zero();
+    const bool fluid = i < total_fluid(m);
+    Scene* gs = g + (fluid ? i / m.n_fluid : 0);
     // a step that was not taken (halted before integrating) leaves the particles as they are
-    const bool taken = g->step_dt > 0.0f;
-    if (i < m.n_fluid && !taken) x = a.pos[i];
-    if (i < m.n_fluid && taken) {
-      float dt = g->step_dt;
+    const bool taken = gs->step_dt > 0.0f;
+    if (fluid && !taken) x = a.pos[i];
+    if (fluid && taken) {
+      float dt = gs->step_dt;
       Vec3 v = a.vel[i] + a.acc[i] * dt;
       x = a.pos[i] + (v + a.xsph[i]) * dt;
       reflect_at_wall(m.wall, x, v);
-      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&g->clock.bad, kBadParticles);
+      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&gs->clock.bad, kBadParticles);
       a.pos[i] = x;
       a.vel[i] = v;
       // the ghost follows its particle between rebuilds
-      int gs = a.ghost_slot[i];
-      if (gs >= 0) {
-        a.pos[gs] = mirror_position(m.wall, x);
-        a.vel[gs] = mirror_velocity(x, v);
+      int ghost = a.ghost_slot[i];
+      if (ghost >= 0) {
+        a.pos[ghost] = mirror_position(m.wall, x);
+        a.vel[ghost] = mirror_velocity(x, v);
       }
       // moved too far for the lists: the next step rebuilds (the clock is already the next)
-      if (norm2(x - a.x_build[i]) > m.rebuild_disp2) raise_flag(&g->rebuild[g->clock.step & 1], 1);
+      if (norm2(x - a.x_build[i]) > m.rebuild_disp2) raise_flag(&gs->rebuild[gs->clock.step & 1], 1);
     }
     start_step(m, a, i, &x);
   }
