@@ -375,7 +375,7 @@ def test_directory_given(tmp_path):
 def test_unknown_scene():
     with pytest.raises(SceneError) as e:
         load_scene("foo")
-    assert str(e.value) == "unknown scene 'foo' (built-in scenes: magic8ball)"
+    assert str(e.value) == "unknown scene 'foo' (built-in scenes: magic8ball, wind-tunnel)"
 
 
 def test_unknown_scene_did_you_mean():

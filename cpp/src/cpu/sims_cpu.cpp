@@ -1,5 +1,6 @@
 // Every kind on the CPU backends (serial and OpenMP): the shared pipelines over CpuExec.
 #include "corpuscle/scenes/magic8ball/build.h"
+#include "corpuscle/scenes/wind_tunnel/build.h"
 #include "corpuscle/sim/registry.h"
 #include "cpu/exec_cpu.h"
 
@@ -9,6 +10,7 @@ std::unique_ptr<Sim> make_sim_cpu(const SimRequest& r, bool parallel) {
   CpuExec ex;
   ex.parallel = parallel;
   if (r.kind == "magic8ball") return m8::make(std::move(ex), r);
+  if (r.kind == "wind-tunnel") return wt::make(std::move(ex), r);
   throw Error("unknown scene kind '" + r.kind + "'");
 }
 

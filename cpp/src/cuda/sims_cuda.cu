@@ -1,6 +1,7 @@
 // Every kind on the CUDA backend: the shared pipelines over CudaExec, and the device list.
 #include "corpuscle/core/devices.h"
 #include "corpuscle/scenes/magic8ball/build.h"
+#include "corpuscle/scenes/wind_tunnel/build.h"
 #include "corpuscle/sim/registry.h"
 #include "cuda/exec_cuda.cuh"
 
@@ -44,6 +45,7 @@ static void use_device(int device) {
 std::unique_ptr<Sim> make_sim_cuda(const SimRequest& r) {
   use_device(r.device);
   if (r.kind == "magic8ball") return m8::make(CudaExec(), r);
+  if (r.kind == "wind-tunnel") return wt::make(CudaExec(), r);
   throw Error("unknown scene kind '" + r.kind + "'");
 }
 

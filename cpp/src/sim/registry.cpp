@@ -9,6 +9,7 @@
 
 #include "corpuscle/core/error.h"
 #include "corpuscle/scenes/magic8ball/build.h"
+#include "corpuscle/scenes/wind_tunnel/build.h"
 #include "cpu/exec_cpu.h"
 
 namespace cps {
@@ -20,7 +21,7 @@ Vec3 ParamSource::vec3(const std::string& key) const {
 }
 
 const std::vector<KindInfo>& kinds() {
-  static const std::vector<KindInfo> k = {{"magic8ball", m8::index_names()}};
+  static const std::vector<KindInfo> k = {{"magic8ball", m8::index_names()}, {"wind-tunnel", wt::index_names()}};
   return k;
 }
 
@@ -47,6 +48,7 @@ std::unique_ptr<Sim> make_sim(const SimRequest& r) {
 
 double bytes_needed(const SimRequest& r) {
   kind_of(r);
+  if (r.kind == "wind-tunnel") return wt::bytes<CpuExec>(r);
   return m8::bytes<CpuExec>(r);
 }
 

@@ -1,0 +1,219 @@
+// The wind tunnel pipeline: its buffers, the order of its stages for one step, the views.
+// SimImpl (sim/sim_impl.h) owns the Exec, the per-scene record and the control.
+//
+// A step: the 2-D cell grid keys the current positions and sorts them (CellGrid<2, Exec>),
+// the particle arrays are gathered into cell order in the other buffers, the cell ranges
+// marked; then the contact forces by gather, the reductions and the per-scene finalize
+// (dt, block averages, clock), and the integration (with recycling) in place. The sorted
+// buffers are current afterwards. Index plug-in: the grid (the only one so far).
+#pragma once
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "corpuscle/core/error.h"
+#include "corpuscle/scenes/wind_tunnel/stages.h"
+#include "corpuscle/scenes/wind_tunnel/tables.h"
+
+namespace cps::wt {
+
+struct GridIndex {
+  static constexpr const char* name = "grid";
+};
+
+template <class Exec, class Index>
+class Pipeline {
+ public:
+  template <class T> using Buf = typename Exec::template Buffer<T>;
+  using SceneRecord = Scene;
+  using ControlRecord = Control;
+  static constexpr const char* kind = "wind-tunnel";
+  static constexpr const char* index_name = Index::name;
+  static constexpr int kNumStages = 4;
+  static const char* stage_name(int s) {
+    static const char* const names[] = {"sort+reorder+mark", "contacts", "reduce+finalize", "integrate"};
+    return names[s];
+  }
+
+  static CellGridSpec<D> grid_spec(const Model& m) { return make_cell_grid<D>(m.lo, m.hi, 2.0f * m.radius); }
+
+  static double bytes_needed(const Model& m) {
+    const double n = m.n;
+    const double per = 2 * (2 * sizeof(Vec2) + sizeof(int)) + sizeof(Vec2) + sizeof(float) + sizeof(int) +
+                       sizeof(StepSums) + 4 * sizeof(uint64_t) + 2 * sizeof(int);
+    const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
+    return n * per + cells + sizeof(Model);
+  }
+
+  static std::vector<FieldInfo> field_table() {
+    std::vector<FieldInfo> t;
+#define CPS_FIELD_INFO(name, T, comps, group, ckpt, settable, storage, count) \
+  t.push_back(FieldInfo{#name, group, dtype_of<T>(), comps, ckpt, settable});
+    CPS_WT_FIELDS(CPS_FIELD_INFO)
+#undef CPS_FIELD_INFO
+    return t;
+  }
+  static std::vector<ScalarInfo> scalar_table() {
+    std::vector<ScalarInfo> t;
+    Scene s{};
+    const char* base = reinterpret_cast<const char*>(&s);
+#define CPS_SCALAR_INFO(name, T, count, member, ckpt) \
+  t.push_back(ScalarInfo{#name, dtype_of<T>(), count, size_t(reinterpret_cast<const char*>(&s.member) - base), ckpt});
+    CPS_WT_SCALARS(CPS_SCALAR_INFO)
+#undef CPS_SCALAR_INFO
+    return t;
+  }
+  static std::vector<ScalarInfo> control_table() {
+    std::vector<ScalarInfo> t;
+    Control u{};
+    const char* base = reinterpret_cast<const char*>(&u);
+#define CPS_CONTROL_INFO(name, T, count, member) \
+  t.push_back(ScalarInfo{#name, dtype_of<T>(), count, size_t(reinterpret_cast<const char*>(&u.member) - base), false});
+    CPS_WT_CONTROLS(CPS_CONTROL_INFO)
+#undef CPS_CONTROL_INFO
+    return t;
+  }
+
+  Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u)
+      : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)) {
+    const int n = m.n;
+    if (n <= 0) throw Error("wind-tunnel: no particles");
+    model_.resize(1);
+    ex_.to_device(model_.data(), &m_, sizeof(Model));
+    for (int p = 0; p < 2; ++p) {
+      pos_[p].resize(n);
+      vel_[p].resize(n);
+      id_[p].resize(n);
+    }
+    force_.resize(n);
+    pressure_.resize(n);
+    contacts_.resize(n);
+    items_.resize(n);
+  }
+
+  static Scene initial_record(const Model& m) {
+    Scene s{};
+    s.clock.time = 0.0;
+    s.clock.end_time = 1e300;
+    s.clock.step = 0;
+    s.clock.dt = 0.0f;
+    s.clock.bad_step = -1;
+    s.sums = s.pending = StepSums::identity();
+    s.block_len = m.block_time;
+    return s;
+  }
+  static void restored(Scene& r) {
+    r.pending = r.sums;
+    r.step_dt = 0.0f;
+  }
+
+  long long particles() const { return m_.n; }
+  const Model& model() const { return m_; }
+  int graph_slot() const { return parity_; }
+
+  void prepare() {}
+  void advance(bool) { parity_ ^= 1; }
+  void invalidate(bool) {}
+
+  void enqueue(bool integrate) {
+    const int n = m_.n;
+    const int cur = parity_, nxt = parity_ ^ 1;
+    Model* md = model_.data();
+    Scene* g = g_;
+    // 1. key and sort the current positions, gather the arrays into cell order, mark cells
+    grid_.sort(ex_, pos_[cur].data(), nullptr, n);
+    ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
+    grid_.mark(ex_);
+    ex_.mark(0);
+    Arrays s = arrays(nxt, cur);
+    CellGridView<D> view = grid_.view(s.pos);
+    // 2. contacts by gather
+    ex_.for_each(n, ForceStage{md, g, s, view});
+    ex_.mark(1);
+    if (integrate) {
+      // 3. the reductions and the per-scene update
+      ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
+      ex_.mark(2);
+      // 4. integrate in place (the sorted buffers become the current ones)
+      ex_.for_each(n, IntegrateStage{md, g, u_, s});
+      ex_.mark(3);
+    } else {
+      ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+      ex_.mark(2);
+    }
+  }
+
+  std::pair<void*, long long> view(const std::string& name, const Scene&) {
+    const int n = m_.n;
+    const int cur = parity_;
+#define CPS_FIELD_VIEW(fname, T, comps, group, ckpt, settable, storage, count) \
+  if (name == #fname) return {static_cast<void*>(storage), (long long)(count)};
+    CPS_WT_FIELDS(CPS_FIELD_VIEW)
+#undef CPS_FIELD_VIEW
+    throw Error("wind-tunnel: no field '" + name + "'");
+  }
+
+  // positions (ids restart at 0..n-1), velocities, or a checkpoint's ids
+  void upload(const std::string& name, const void* src, long long count) {
+    const int n = m_.n;
+    if (count != n) throw Error("wind-tunnel: " + name + " needs " + std::to_string(n) + " items");
+    const int cur = parity_;
+    if (name == "position") {
+      ex_.to_device(pos_[cur].data(), src, n * sizeof(Vec2));
+      std::vector<int> ids(n);
+      for (int i = 0; i < n; ++i) ids[i] = i;
+      ex_.to_device(id_[cur].data(), ids.data(), n * sizeof(int));
+    } else if (name == "velocity") {
+      ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec2));
+    } else if (name == "id") {
+      ex_.to_device(id_[cur].data(), src, n * sizeof(int));
+    } else {
+      throw Error("wind-tunnel: field '" + name + "' cannot be set");
+    }
+  }
+
+  std::vector<std::pair<std::string, double>> derived(const Scene& r) const {
+    const float me = effective_mass(m_.mass, m_.mass), mw = effective_mass(m_.mass, 0.0f);
+    return {{"vmax", std::sqrt(double(r.sums.vmax2))},
+            {"lift", double(r.sums.force[1])},
+            {"drag", double(r.sums.force[0])},
+            {"chosen_dt", double(choose_dt(m_, r.sums.vmax2))},
+            {"restitution_pp", double(restitution_from_damping(m_.pp, me))},
+            {"restitution_wall", double(restitution_from_damping(m_.wall, mw))},
+            {"restitution_wing", double(restitution_from_damping(m_.wing, mw))},
+            {"contact_time_pp", double(contact_time(m_.pp, me))},
+            {"contact_time_wing", double(contact_time(m_.wing, mw))}};
+  }
+
+ private:
+  Arrays arrays(int cur, int nxt) {
+    Arrays a;
+    a.pos = pos_[cur].data();
+    a.vel = vel_[cur].data();
+    a.pos_alt = pos_[nxt].data();
+    a.vel_alt = vel_[nxt].data();
+    a.id = id_[cur].data();
+    a.id_alt = id_[nxt].data();
+    a.force = force_.data();
+    a.pressure = pressure_.data();
+    a.contacts = contacts_.data();
+    a.items = items_.data();
+    return a;
+  }
+
+  Exec& ex_;
+  Model m_;
+  Scene* g_;
+  const Control* u_;
+  CellGrid<D, Exec> grid_;
+  Buf<Model> model_;
+  Buf<Vec2> pos_[2], vel_[2];
+  Buf<int> id_[2];
+  Buf<Vec2> force_;
+  Buf<float> pressure_;
+  Buf<int> contacts_;
+  Buf<StepSums> items_;
+  int parity_ = 0;
+};
+
+}  // namespace cps::wt

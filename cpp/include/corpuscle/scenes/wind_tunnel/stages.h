@@ -1,0 +1,296 @@
+// The wind tunnel's stages: functors over the particles (lanes of width 1: for_each) or one
+// item per scene. Nothing here knows which backend runs it.
+#pragma once
+#include "corpuscle/core/atomics.h"
+#include "corpuscle/scenes/wind_tunnel/model.h"
+
+namespace cps::wt {
+
+CPS_HD CPS_INLINE bool halted(const Scene* g) { return g->clock.done != 0 || g->clock.bad != 0; }
+
+CPS_HD CPS_INLINE void raise_first(int* p, int code) { atomic_cas(p, 0, code); }
+
+CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
+#ifdef __CUDA_ARCH__
+  atomicAdd(reinterpret_cast<unsigned long long*>(p), static_cast<unsigned long long>(v));
+#else
+  __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
+#endif
+}
+
+CPS_HD CPS_INLINE float fcos(float x) {
+#ifdef __CUDA_ARCH__
+  return ::cosf(x);
+#else
+  return std::cos(x);
+#endif
+}
+CPS_HD CPS_INLINE float fsin(float x) {
+#ifdef __CUDA_ARCH__
+  return ::sinf(x);
+#else
+  return std::sin(x);
+#endif
+}
+
+// counter-based random numbers: a pure function of (seed, particle id, step, stream), so
+// every backend and thread count draws the same ones (lowbias32, C. Wellons 2018)
+CPS_HD CPS_INLINE uint32_t mix32(uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+// uniform in (0, 1)
+CPS_HD CPS_INLINE float uniform01(unsigned seed, int id, long long step, int stream) {
+  uint32_t h = mix32(seed ^ mix32(uint32_t(step) ^ mix32(uint32_t(step >> 32) + 0x9e3779b9u)));
+  h = mix32(h ^ mix32(uint32_t(id) * 4u + uint32_t(stream)));
+  return (float(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
+}
+
+// the fastest particle moves at most dt_fraction radii per step, and dt <= dt_max
+CPS_HD CPS_INLINE float choose_dt(const Model& m, float vmax2) {
+  float v = fsqrt(vmax2);
+  float dt = m.dt_max;
+  if (v > 0.0f) dt = fmin2(dt, m.dt_fraction * m.radius / v);
+  return dt;
+}
+
+// stage 1: the current arrays gathered into cell order (order: sorted slot -> input slot)
+struct ReorderStage {
+  const int* order;
+  Arrays a;
+  CPS_HD void operator()(int j) const {
+    int o = order[j];
+    a.pos_alt[j] = a.pos[o];
+    a.vel_alt[j] = a.vel[o];
+    a.id_alt[j] = a.id[o];
+  }
+};
+
+// the contact force on particle i from the two walls and the airfoil; adds the reaction on
+// the airfoil (force, moment about the quarter chord) to s
+CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const Vec2& x, const Vec2& v, float& pressure, int& contacts,
+                                       StepSums& s) {
+  Vec2 F = Vec2::zero();
+  Vec2 f;
+  float mag;
+  const Vec2 up{{0.0f, 1.0f}}, down{{0.0f, -1.0f}};
+  if (wall_contact_force<2>(m.wall, x[1] - m.lo[1], up, v, m.radius, Vec2::zero(), f, mag)) {
+    F += f;
+    s.wall_force += f;
+    pressure += mag;
+    contacts += 1;
+  }
+  if (wall_contact_force<2>(m.wall, m.hi[1] - x[1], down, v, m.radius, Vec2::zero(), f, mag)) {
+    F += f;
+    s.wall_force += f;
+    pressure += mag;
+    contacts += 1;
+  }
+  if (m.n_edges > 0 && box_distance2(m.bbox, x) < m.radius * m.radius) {
+    PolygonHit hit;
+    if (polygon_contact_force(m.wing, m.airfoil(), x, v, m.radius, f, mag, hit)) {
+      F += f;
+      pressure += mag;
+      contacts += 1;
+      // the airfoil gets -f, applied at the contact point
+      Vec2 fa = -f;
+      Vec2 r = hit.closest - m.quarter_chord;
+      s.force += fa;
+      s.moment += r[0] * fa[1] - r[1] * fa[0];
+      s.contacts += 1;
+    }
+  }
+  return F;
+}
+
+// stage 2: contact forces by gather over the cell grid (each particle sums its own: no
+// atomics, the same sum in the same order on every backend), walls, airfoil; the
+// per-particle items of the step's reductions
+struct ForceStage {
+  const Model* model;
+  const Scene* g;
+  Arrays s;
+  CellGridView<D> grid;
+  CPS_HD void operator()(int i) const {
+    if (halted(g)) return;  // the reduction of a step not taken is discarded
+    const Model& m = *model;
+    const Vec2 x = s.pos[i], v = s.vel[i];
+    Vec2 F = Vec2::zero();
+    float pressure = 0.0f;
+    int contacts = 0;
+    const Vec2* pos = s.pos;
+    const Vec2* vel = s.vel;
+    const float r = m.radius;
+    const SpringDashpot law = m.pp;
+    grid.gather(i, x, [&](int j, const Vec2&, float) {
+      if (j == i) return;
+      Vec2 f;
+      float mag;
+      if (pair_contact_force<2>(law, x, v, r, pos[j], vel[j], r, f, mag)) {
+        F += f;
+        pressure += mag;
+        contacts += 1;
+      }
+    });
+    StepSums it = StepSums::identity();
+    F += boundary_forces(m, x, v, pressure, contacts, it);
+    it.total_force = F;
+    it.vmax2 = norm2(v);
+    it.ke = 0.5f * m.mass * it.vmax2;
+    s.force[i] = F;
+    s.pressure[i] = pressure;
+    s.contacts[i] = contacts;
+    s.items[i] = it;
+  }
+};
+
+// the block averages: add this step's airfoil force over dt; a full block is closed, and
+// when all kMaxBlocks are full adjacent pairs are merged and the block length doubles
+// (batch means with a growing batch: the standard error stays honest for correlated series)
+CPS_HD CPS_INLINE void accumulate_blocks(Scene& G, const StepSums& S, double dt) {
+  G.cur_t += dt;
+  G.cur_lift += double(S.force[1]) * dt;
+  G.cur_drag += double(S.force[0]) * dt;
+  G.cur_moment += double(S.moment) * dt;
+  if (G.cur_t < G.block_len) return;
+  if (G.nblocks == kMaxBlocks) {
+    for (int k = 0; k < kMaxBlocks / 2; ++k) {
+      G.blk_lift[k] = 0.5 * (G.blk_lift[2 * k] + G.blk_lift[2 * k + 1]);
+      G.blk_drag[k] = 0.5 * (G.blk_drag[2 * k] + G.blk_drag[2 * k + 1]);
+      G.blk_moment[k] = 0.5 * (G.blk_moment[2 * k] + G.blk_moment[2 * k + 1]);
+    }
+    G.nblocks = kMaxBlocks / 2;
+    G.block_len *= 2.0;
+    if (G.cur_t < G.block_len) return;
+  }
+  G.blk_lift[G.nblocks] = G.cur_lift / G.cur_t;
+  G.blk_drag[G.nblocks] = G.cur_drag / G.cur_t;
+  G.blk_moment[G.nblocks] = G.cur_moment / G.cur_t;
+  G.nblocks += 1;
+  G.cur_t = G.cur_lift = G.cur_drag = G.cur_moment = 0.0;
+}
+
+// stage 3 (one item per scene): dt, the block averages, the clock
+struct FinalizeStage {
+  const Model* model;
+  Scene* g;
+  CPS_HD void operator()(int) const {
+    const Model& m = *model;
+    Scene& G = *g;
+    Clock& C = G.clock;
+    if (C.done || C.time >= C.end_time) {
+      C.done = 1;
+      G.step_dt = 0.0f;
+      return;
+    }
+    if (C.bad) {
+      if (C.bad_step < 0) C.bad_step = C.step;
+      G.step_dt = 0.0f;
+      return;
+    }
+    const StepSums& S = G.pending;
+    if (!finite(S.vmax2) || !finite(S.force[0] + S.force[1] + S.moment)) {
+      C.bad = kBadParticles;
+      C.bad_step = C.step + 1;
+      G.step_dt = 0.0f;
+      return;
+    }
+    float dt = choose_dt(m, S.vmax2);
+    const bool last = C.time + double(dt) >= C.end_time;
+    if (last) dt = float(C.end_time - C.time);
+    G.sums = S;
+    // the forces of this step's state act over [time, time + dt]
+    if (C.time >= m.measure_start) accumulate_blocks(G, S, double(dt));
+    G.step_dt = dt;
+    C.dt = dt;
+    C.time = last ? C.end_time : C.time + double(dt);
+    C.done = last ? 1 : 0;
+    C.step += 1;
+  }
+};
+
+// a particle that left through the inflow or the outflow re-enters at the inflow with
+// free-stream statistics: y uniform across the channel (a radius from the walls), velocity
+// U (1 + speed_scale) along x plus a Gaussian thermal spread (Box-Muller) of m.thermal U
+// per component; x is the overshoot past the outflow, or a uniform fraction of one step's
+// free-stream advance for a particle that left upstream
+CPS_HD CPS_INLINE void reenter(const Model& m, const Control& u, int id, long long step, float dt, Vec2& x, Vec2& v) {
+  const float U = m.speed * (1.0f + u.speed_scale);
+  const float u0 = uniform01(m.seed, id, step, 0), u1 = uniform01(m.seed, id, step, 1);
+  const float u2 = uniform01(m.seed, id, step, 2), u3 = uniform01(m.seed, id, step, 3);
+  const float over = x[0] > m.hi[0] ? fmin2(x[0] - m.hi[0], U * dt) : u0 * U * dt;
+  const float span = m.hi[1] - m.lo[1] - 2.0f * m.radius;
+  x = Vec2{{m.lo[0] + over, m.lo[1] + m.radius + u1 * span}};
+  const float sigma = m.thermal * m.speed;
+  const float rad = fsqrt(-2.0f * flog(u2));
+  v = Vec2{{U + sigma * rad * fcos(2.0f * kPi * u3), sigma * rad * fsin(2.0f * kPi * u3)}};
+}
+
+// no particle ends a step inside the airfoil or outside the channel: a centre that got in is
+// put back on the surface (a twentieth of a radius outside, along the signed-distance
+// normal) with its normal velocity reflected; a centre past a wall is mirrored back. These
+// are counted (pushouts): with the contact stiffness resolving the contacts, there are none
+CPS_HD CPS_INLINE bool keep_out(const Model& m, Vec2& x, Vec2& v) {
+  bool moved = false;
+  if (x[1] < m.lo[1]) {
+    x[1] = fmin2(2.0f * m.lo[1] - x[1], m.hi[1]);
+    v[1] = v[1] < 0.0f ? -v[1] : v[1];
+    moved = true;
+  }
+  if (x[1] > m.hi[1]) {
+    x[1] = fmax2(2.0f * m.hi[1] - x[1], m.lo[1]);
+    v[1] = v[1] > 0.0f ? -v[1] : v[1];
+    moved = true;
+  }
+  if (m.n_edges > 0 && box_distance2(m.bbox, x) == 0.0f && polygon_contains(m.airfoil(), x)) {
+    PolygonHit hit = polygon_sdf(m.airfoil(), x);
+    float step = 0.05f * m.radius;
+    for (int k = 0; k < 8; ++k) {
+      x = hit.closest + hit.normal * step;
+      if (!polygon_contains(m.airfoil(), x)) break;
+      step *= 2.0f;
+    }
+    float vn = dot(v, hit.normal);
+    if (vn < 0.0f) v -= hit.normal * (2.0f * vn);
+    moved = true;
+  }
+  return moved;
+}
+
+// stage 4: integrate (forward or symplectic Euler), recycle at the outflow, keep every
+// particle in the channel and out of the airfoil
+struct IntegrateStage {
+  const Model* model;
+  Scene* g;
+  const Control* ctl;
+  Arrays s;
+  CPS_HD void operator()(int i) const {
+    const float dt = g->step_dt;
+    if (!(dt > 0.0f)) return;  // a step not taken leaves the particles as they are
+    const Model& m = *model;
+    Vec2 x = s.pos[i], v = s.vel[i];
+    const Vec2 a = s.force[i] * (1.0f / m.mass);
+    if (m.integrator == kSymplecticEuler) {
+      v += a * dt;
+      x += v * dt;
+    } else {
+      x += v * dt;
+      v += a * dt;
+    }
+    if (x[0] > m.hi[0] || x[0] < m.lo[0]) {
+      // the step counter is already the next step's: (id, step) is unique
+      reenter(m, *ctl, s.id[i], g->clock.step, dt, x, v);
+      add_count(&g->recycled, 1);
+    }
+    if (keep_out(m, x, v)) add_count(&g->pushouts, 1);
+    if (!finite(x[0] + x[1] + v[0] + v[1])) raise_first(&g->clock.bad, kBadParticles);
+    s.pos[i] = x;
+    s.vel[i] = v;
+  }
+};
+
+}  // namespace cps::wt

@@ -1,0 +1,45 @@
+// The wind tunnel's tables, declared once: its particle fields, the scalars of its
+// per-scene record and its control (expanded as the Magic 8-Ball's are).
+#pragma once
+#include "corpuscle/scenes/wind_tunnel/model.h"
+
+// X(name, C type, components, group, checkpointed, settable, storage, count)
+// (cur: the current buffers, n: particles)
+#define CPS_WT_FIELDS(X)                                                  \
+  X(position, float, 2, "fluid", true, true, pos_[cur].data(), n)         \
+  X(velocity, float, 2, "fluid", true, true, vel_[cur].data(), n)         \
+  X(id, int, 1, "fluid", true, false, id_[cur].data(), n)                 \
+  X(pressure, float, 1, "fluid", false, false, pressure_.data(), n)       \
+  X(force, float, 2, "fluid", false, false, force_.data(), n)             \
+  X(contacts, int, 1, "fluid", false, false, contacts_.data(), n)
+
+// X(name, C type, count, member of Scene, checkpointed)
+#define CPS_WT_SCALARS(X)                                         \
+  X(time, double, 1, clock.time, true)                            \
+  X(end_time, double, 1, clock.end_time, false)                   \
+  X(step, long long, 1, clock.step, true)                         \
+  X(dt, float, 1, clock.dt, true)                                 \
+  X(done, int, 1, clock.done, false)                              \
+  X(bad, int, 1, clock.bad, false)                                \
+  X(bad_step, long long, 1, clock.bad_step, false)                \
+  X(sums_vmax2, float, 1, sums.vmax2, true)                       \
+  X(sums_ke, float, 1, sums.ke, true)                             \
+  X(airfoil_force, float, 2, sums.force, true)                    \
+  X(airfoil_moment, float, 1, sums.moment, true)                  \
+  X(wall_force, float, 2, sums.wall_force, true)                  \
+  X(total_force, float, 2, sums.total_force, true)                \
+  X(airfoil_contacts, int, 1, sums.contacts, true)                \
+  X(recycled, long long, 1, recycled, true)                       \
+  X(pushouts, long long, 1, pushouts, true)                       \
+  X(block_len, double, 1, block_len, true)                        \
+  X(nblocks, int, 1, nblocks, true)                               \
+  X(block_t, double, 1, cur_t, true)                              \
+  X(block_lift_sum, double, 1, cur_lift, true)                    \
+  X(block_drag_sum, double, 1, cur_drag, true)                    \
+  X(block_moment_sum, double, 1, cur_moment, true)                \
+  X(blocks_lift, double, kMaxBlocks, blk_lift, true)              \
+  X(blocks_drag, double, kMaxBlocks, blk_drag, true)              \
+  X(blocks_moment, double, kMaxBlocks, blk_moment, true)
+
+// X(name, C type, count, member of Control)
+#define CPS_WT_CONTROLS(X) X(speed_scale, float, 1, speed_scale)

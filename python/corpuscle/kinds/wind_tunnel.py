@@ -1,0 +1,367 @@
+"""The wind tunnel (seed 000): a 2-D soft-sphere gas streaming past an airfoil in a channel
+with walls top and bottom. Particles leaving on the right (or the left) re-enter at the
+inflow with free-stream statistics, so the count is constant and the flow steady; the
+reaction on the airfoil (lift, drag, moment about the quarter chord) is summed every step
+on the backend and averaged in blocks (batch means) over the steady part of the run.
+
+Everything the Python side knows about the kind (see :mod:`corpuscle.kinds`): the schema,
+the builder (particle radius from the solid fraction, the airfoil polygon, a jittered
+lattice start outside the airfoil, the free-stream velocity), the state, the result (mean
+lift, drag, moment and C_L, C_D, C_M with standard errors), the run header and the summary.
+The core is cpp/include/corpuscle/scenes/wind_tunnel/.
+
+Units: SI, 2-D (a mass is per particle, a force per unit span). The seed's particles have
+unit mass (its accelerations are its forces).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .. import airfoils
+from ..scene import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
+from . import Build, Kind, Target, check_memory, core, key_values
+
+__all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "restitution", "damping",
+           "airfoil_polygon", "coefficients"]
+
+# the default particle counts: the seed's on CUDA, the original's CPU size elsewhere
+DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
+
+UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)"}
+
+INTEGRATORS = {"forward-euler": 0, "symplectic-euler": 1}
+
+_K = KeySpec
+WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
+    "run.end_time": _K("float", 20.0, "s", 0.0, 1e7, "simulated time at which the run ends", lo_open=True),
+    "run.seed": _K("int", 0, "", 0, INT64_MAX, "random seed: start lattice jitter and re-entry positions"),
+    "run.record_every": _K("int", 200, "steps", 1, 10**9, "record a frame every this many steps"),
+    # the gas
+    "gas.particles": _K("int", 0, "", 0, 2**31 - 1,
+                        "number of particles; 0: 2,097,152 on CUDA, 131,072 on the CPU backends"),
+    "gas.radius": _K("float", 0.0, "m", 0.0, 1.0,
+                     "particle radius; 0: from gas.solid_fraction (so --particles keeps the fraction)"),
+    "gas.solid_fraction": _K("float", 0.1, "", 0.0, 0.5,
+                             "area fraction N pi r^2 / free area that sets the radius when gas.radius = 0",
+                             lo_open=True),
+    "gas.mass": _K("float", 1.0, "kg", 0.0, 1e6, "particle mass (the seed's: 1)", lo_open=True),
+    # contact laws: spring k on the overlap, damper c on the normal approach speed
+    "contact.k": _K("float", 10000.0, "N/m", 0.0, 1e12, "particle-particle spring stiffness", lo_open=True),
+    "contact.c": _K("float", 50.0, "N·s/m", 0.0, 1e9, "particle-particle damping (unless contact.restitution)"),
+    "contact.restitution": _K("float", 0.0, "", 0.0, 1.0,
+                              "particle-particle restitution; > 0 sets contact.c from k and the masses"),
+    "wall.k": _K("float", 10000.0, "N/m", 0.0, 1e12, "particle-wall spring stiffness", lo_open=True),
+    "wall.c": _K("float", 50.0, "N·s/m", 0.0, 1e9, "particle-wall damping (unless wall.restitution)"),
+    "wall.restitution": _K("float", 0.0, "", 0.0, 1.0, "particle-wall restitution; > 0 sets wall.c"),
+    "wing.k": _K("float", 50000.0, "N/m", 0.0, 1e12, "particle-airfoil spring stiffness", lo_open=True),
+    "wing.c": _K("float", 50.0, "N·s/m", 0.0, 1e9, "particle-airfoil damping (unless wing.restitution)"),
+    "wing.restitution": _K("float", 0.0, "", 0.0, 1.0, "particle-airfoil restitution; > 0 sets wing.c"),
+    # the channel and the free stream
+    "channel.length": _K("float", 3.56, "m", 0.0, 1e4, "channel length (x from -length/2 to length/2)", lo_open=True),
+    "channel.height": _K("float", 2.0, "m", 0.0, 1e4, "channel height (walls at y = -height/2, height/2)",
+                         lo_open=True),
+    "inflow.speed": _K("float", 0.05, "m/s", 0.0, 1e4, "free-stream speed U (along +x)", lo_open=True),
+    "inflow.thermal": _K("float", 0.0, "", 0.0, 100.0,
+                         "thermal speed sqrt(2 kT / m) over U (1 / the speed ratio); 0: the seed's cold beam"),
+    # the airfoil
+    "airfoil.shape": _K("str", "e398", "", doc="'e398' (shipped), a NACA 4-digit code ('naca2412'), "
+                        "'flat-plate', or the path of a Selig/Lednicer .dat file"),
+    "airfoil.chord": _K("float", 0.5, "m", 0.0, 1e3, "chord length", lo_open=True),
+    "airfoil.angle_of_attack": _K("float", 10.0, "deg", -90.0, 90.0, "angle of attack, nose up positive"),
+    "airfoil.leading_edge": _K("vec2", [-1.2, 0.0], "m", -1e4, 1e4, "leading-edge position"),
+    "airfoil.thickness": _K("float", 0.02, "chord", 0.0, 0.5, "flat-plate thickness", lo_open=True),
+    # time stepping
+    "timestep.fraction": _K("float", 1.0, "radius", 0.0, 10.0,
+                            "the fastest particle moves at most this many radii per step", lo_open=True),
+    "timestep.dt_max": _K("float", 0.001, "s", 0.0, 1.0, "largest time step", lo_open=True),
+    "timestep.integrator": _K("enum", "forward-euler", "", doc="forward-euler (the seed's) or symplectic-euler",
+                              choices=tuple(INTEGRATORS)),
+    # measurement
+    "measure.start": _K("float", 0.5, "", 0.0, 1.0,
+                        "the steady part starts at this fraction of run.end_time", hi_open=True),
+    "measure.block_time": _K("float", 0.0, "s", 0.0, 1e6,
+                             "initial averaging block length; 0: the steady part / 64 (blocks double as needed)"),
+}
+del _K
+
+
+def _channel_room(values: dict[str, Any], arrays) -> None:
+    le = values["airfoil.leading_edge"]
+    L, H = values["channel.length"], values["channel.height"]
+    c = values["airfoil.chord"]
+    if not (-L / 2 < le[0] < L / 2 and -H / 2 < le[1] < H / 2 and le[0] + c < L / 2):
+        raise SceneError(f"airfoil.leading_edge = {_fmt_value(le)} with airfoil.chord = {_fmt_value(c)} must lie "
+                         f"inside the channel ({_fmt_value(L)} x {_fmt_value(H)} centred on the origin)")
+
+
+SCHEMA = SceneKind(
+    name="wind-tunnel",
+    description="2-D soft-sphere gas past an airfoil: lift, drag and moment (seed 000)",
+    keys=WIND_TUNNEL_KEYS,
+    checks=[_channel_room],
+)
+
+
+# ---------------------------------------------------------------------------
+# physics helpers (the same closed forms as physics/dem.h)
+# ---------------------------------------------------------------------------
+
+
+def restitution(k: float, c: float, m_eff: float) -> float:
+    """Normal restitution of the spring-dashpot law (0 when overdamped)."""
+    z = c / (2.0 * math.sqrt(k * m_eff))
+    return 0.0 if z >= 1.0 else math.exp(-math.pi * z / math.sqrt(1.0 - z * z))
+
+
+def damping(k: float, e: float, m_eff: float) -> float:
+    """The damping c that gives restitution e."""
+    le = math.log(e)
+    z = -le / math.sqrt(math.pi ** 2 + le * le)
+    return 2.0 * z * math.sqrt(k * m_eff)
+
+
+def airfoil_polygon(values: dict[str, Any]) -> np.ndarray:
+    """The airfoil in scene coordinates (counter-clockwise, float64 (n, 2))."""
+    shape = str(values["airfoil.shape"]).strip()
+    if shape.lower() in ("flat-plate", "flat_plate", "plate"):
+        base = airfoils.flat_plate(float(values["airfoil.thickness"]))
+    else:
+        try:
+            base = airfoils.load(shape)
+        except ValueError as e:
+            raise SceneError(f"airfoil.shape: {e}") from None
+    return airfoils.place(base, float(values["airfoil.chord"]), float(values["airfoil.angle_of_attack"]),
+                          tuple(values["airfoil.leading_edge"]))
+
+
+def _inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Crossing-parity point in polygon, vectorised over points."""
+    inside = np.zeros(len(pts), dtype=bool)
+    x, y = pts[:, 0], pts[:, 1]
+    a, b = poly, np.roll(poly, -1, axis=0)
+    for (ax, ay), (bx, by) in zip(a, b):
+        cross = (ay > y) != (by > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xi = ax + (y - ay) * (bx - ax) / (by - ay)
+        inside ^= cross & (x < xi)
+    return inside
+
+
+def _distance(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Unsigned distance from points to the polygon's boundary."""
+    d2 = np.full(len(pts), np.inf)
+    a, b = poly, np.roll(poly, -1, axis=0)
+    for p0, p1 in zip(a, b):
+        e = p1 - p0
+        t = np.clip(((pts - p0) @ e) / max(float(e @ e), 1e-300), 0.0, 1.0)
+        q = p0 + t[:, None] * e
+        d2 = np.minimum(d2, np.einsum("ij,ij->i", pts - q, pts - q))
+    return np.sqrt(d2)
+
+
+def signed_distance(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Signed distance (negative inside), float64, for tests and placement."""
+    pts = np.asarray(pts, dtype=np.float64)
+    d = _distance(poly, pts)
+    return np.where(_inside(poly, pts), -d, d)
+
+
+def coefficients(values: dict[str, float], rho: float, U: float, chord: float) -> dict[str, float]:
+    """C_L, C_D, C_M from lift, drag, moment (per span) and the free stream."""
+    q = 0.5 * rho * U * U
+    return {"cl": values["lift"] / (q * chord), "cd": values["drag"] / (q * chord),
+            "cm": values["moment"] / (q * chord * chord)}
+
+
+# ---------------------------------------------------------------------------
+# the kind
+# ---------------------------------------------------------------------------
+
+
+class WindTunnel(Kind):
+    name = "wind-tunnel"
+    schema = SCHEMA
+    dim = 2
+    particle_key = "gas.particles"
+    unstable_reasons = UNSTABLE_REASONS
+    frame_fields = ("position", "pressure")
+    units = {"position": "m", "velocity": "m/s", "pressure": "N/m", "force": "N/m", "lift": "N/m", "drag": "N/m",
+             "moment": "N", "kinetic_energy": "J", "vmax": "m/s", "airfoil_contacts": "count"}
+
+    def summary(self, result: dict[str, Any]) -> tuple[list[str], dict[str, Any]]:
+        lines = []
+        rest = dict(result)
+        if "cl" in result:
+            def pm(k):
+                v, e = result.get(k), result.get(k + "_se")
+                return f"{v:.4g} ± {e:.2g}" if v is not None and e is not None and math.isfinite(e) else f"{v:.4g}"
+            if result.get("blocks", 0) > 0:
+                lines.append(f"C_L = {pm('cl')}, C_D = {pm('cd')}, C_M = {pm('cm')} "
+                             f"(over {result['blocks']} blocks from t = {result['measure_start']:.4g} s)")
+            else:
+                lines.append(f"no forces averaged yet (the steady part starts at t = {result['measure_start']:.4g} s)")
+            for k in ("cl", "cd", "cm", "cl_se", "cd_se", "cm_se"):
+                rest.pop(k, None)
+        if "particles_note" in result:
+            lines.append(result["particles_note"])
+            rest.pop("particles_note")
+        return lines, rest
+
+    def build(self, scene, target: Target, checkpoint: dict | None = None) -> Build:
+        v = scene.values
+        n = int(v["gas.particles"]) or DEFAULT_PARTICLES.get(target.backend, 131_072)
+        L, H = float(v["channel.length"]), float(v["channel.height"])
+        lo, hi = np.array([-L / 2, -H / 2]), np.array([L / 2, H / 2])
+        poly = airfoil_polygon(v)
+        free_area = L * H - abs(airfoils.signed_area(poly))
+        radius = float(v["gas.radius"]) or math.sqrt(float(v["gas.solid_fraction"]) * free_area / (math.pi * n))
+        m = float(v["gas.mass"])
+        laws = {}
+        for key, m_eff in (("contact", m / 2), ("wall", m), ("wing", m)):
+            k, c, e = float(v[f"{key}.k"]), float(v[f"{key}.c"]), float(v[f"{key}.restitution"])
+            laws[key] = (k, damping(k, e, m_eff) if e > 0 else c)
+        chord = float(v["airfoil.chord"])
+        a = math.radians(float(v["airfoil.angle_of_attack"]))
+        le = np.asarray(v["airfoil.leading_edge"], dtype=np.float64)
+        quarter = le + 0.25 * chord * np.array([math.cos(a), -math.sin(a)])
+        end = float(v["run.end_time"])
+        t0 = float(v["measure.start"]) * end
+        block = float(v["measure.block_time"]) or max((end - t0) / 64.0, 1e-9)
+        params = {
+            "n": n, "integrator": INTEGRATORS[v["timestep.integrator"]], "radius": radius, "mass": m,
+            "k": laws["contact"][0], "c": laws["contact"][1], "k_wall": laws["wall"][0], "c_wall": laws["wall"][1],
+            "k_wing": laws["wing"][0], "c_wing": laws["wing"][1],
+            "channel_lo": lo.tolist(), "channel_hi": hi.tolist(), "speed": float(v["inflow.speed"]),
+            "thermal": float(v["inflow.thermal"]) / math.sqrt(2.0), "dt_fraction": float(v["timestep.fraction"]),
+            "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
+            "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
+        }
+        check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius")),
+                     f"{n} particles")
+        if len(poly) > 1024:
+            raise SceneError(f"airfoil.shape: {len(poly)} vertices, at most 1024")
+        if checkpoint is None:
+            pos, vel = self._place(n, radius, lo, hi, poly, params, int(v["run.seed"]))
+        else:
+            pos = np.ascontiguousarray(checkpoint["position"], dtype=np.float32)
+            vel = np.ascontiguousarray(checkpoint["velocity"], dtype=np.float32)
+            if pos.shape != (n, 2):
+                raise ValueError(f"checkpoint: {pos.shape[0] if pos.ndim else 0} particles, the scene has {n}")
+        rho = n * m / free_area
+        info = {"radius": radius, "mass": m, "density": rho, "chord": chord, "airfoil": poly, "free_area": free_area,
+                "speed": float(v["inflow.speed"]), "measure_start": t0,
+                "restitution_pp": restitution(laws["contact"][0], laws["contact"][1], m / 2),
+                "restitution_wall": restitution(laws["wall"][0], laws["wall"][1], m),
+                "restitution_wing": restitution(laws["wing"][0], laws["wing"][1], m)}
+        arrays = {"position": pos, "velocity": vel, "airfoil": np.ascontiguousarray(poly, dtype=np.float32)}
+        return Build(params, arrays, info)
+
+    @staticmethod
+    def _place(n, radius, lo, hi, poly, params, seed):
+        """A jittered square lattice over the channel, a radius clear of the walls and the
+        airfoil, n of its sites drawn at random; velocities are the free stream."""
+        rng = np.random.default_rng(seed)
+        ext = hi - lo - 2 * radius
+        free = float(np.prod(ext)) - abs(airfoils.signed_area(poly))
+        a = math.sqrt(free / (n * 1.1))
+        if a <= 2 * radius * 1.0001:
+            raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
+                             f"(lattice spacing {a:.3g} m < a diameter)")
+        while True:
+            nx, ny = int(ext[0] / a), int(ext[1] / a)
+            xs = lo[0] + radius + (np.arange(nx) + 0.5) * (ext[0] / nx)
+            ys = lo[1] + radius + (np.arange(ny) + 0.5) * (ext[1] / ny)
+            X, Y = np.meshgrid(xs, ys, indexing="ij")
+            pts = np.column_stack([X.ravel(), Y.ravel()])
+            gap = min(ext[0] / nx, ext[1] / ny)
+            pts += rng.uniform(-1, 1, pts.shape) * 0.45 * (gap - 2 * radius)
+            box_lo, box_hi = poly.min(axis=0) - 2 * radius, poly.max(axis=0) + 2 * radius
+            near = np.all((pts > box_lo) & (pts < box_hi), axis=1)
+            keep = np.ones(len(pts), dtype=bool)
+            if near.any():
+                keep[near] = signed_distance(poly, pts[near]) > 1.05 * radius
+            pts = pts[keep]
+            if len(pts) >= n:
+                break
+            a *= 0.97
+            if a <= 2 * radius * 1.0001:
+                raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit around the airfoil")
+        pick = np.sort(rng.choice(len(pts), size=n, replace=False))
+        pos = pts[pick]
+        U = params["speed"]
+        sigma = params["thermal"] * U
+        vel = np.zeros_like(pos)
+        vel[:, 0] = U
+        if sigma > 0:
+            vel += rng.normal(0.0, sigma, vel.shape)
+        return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
+
+    # reading -------------------------------------------------------------------------
+    def state(self, sim, s: dict[str, Any]) -> dict[str, Any]:
+        f = s["airfoil_force"]
+        return {"time": s["time"], "end_time": s["end_time"], "step": s["step"], "dt": s["dt"],
+                "done": bool(s["done"]), "bad": s["bad"], "bad_step": s["bad_step"],
+                "lift": float(f[1]), "drag": float(f[0]), "moment": float(s["airfoil_moment"]),
+                "airfoil_contacts": int(s["airfoil_contacts"]), "wall_force": list(s["wall_force"]),
+                "total_force": list(s["total_force"]), "kinetic_energy": float(s["sums_ke"]),
+                "vmax": float(s["vmax"]), "recycled": int(s["recycled"]), "pushouts": int(s["pushouts"]),
+                "chosen_dt": float(s["chosen_dt"])}
+
+    def diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:
+        st = self.state(sim, s)
+        return {k: float(st[k]) for k in ("lift", "drag", "moment", "kinetic_energy", "vmax", "airfoil_contacts")}
+
+    def averages(self, sim, s: dict[str, Any]) -> dict[str, Any]:
+        """Mean lift, drag, moment and their standard errors from the block means (batch
+        means: the blocks are long against the force's correlation time)."""
+        nb = int(s["nblocks"])
+        out: dict[str, Any] = {"blocks": nb, "block_time": float(s["block_len"])}
+        for name, key in (("lift", "blocks_lift"), ("drag", "blocks_drag"), ("moment", "blocks_moment")):
+            b = np.asarray(s[key], dtype=np.float64)[:nb]
+            out[name] = float(b.mean()) if nb else float("nan")
+            out[name + "_se"] = float(b.std(ddof=1) / math.sqrt(nb)) if nb > 1 else float("nan")
+        return out
+
+    def result(self, sim, s: dict[str, Any]) -> dict[str, Any]:
+        av = self.averages(sim, s)
+        U, c, rho = sim.info["speed"], sim.info["chord"], sim.info["density"]
+        co = coefficients(av, rho, U, c)
+        q = 0.5 * rho * U * U
+        out = {"lift": av["lift"], "drag": av["drag"], "moment": av["moment"],
+               "lift_se": av["lift_se"], "drag_se": av["drag_se"], "moment_se": av["moment_se"],
+               "cl": co["cl"], "cd": co["cd"], "cm": co["cm"],
+               "cl_se": av["lift_se"] / (q * c), "cd_se": av["drag_se"] / (q * c), "cm_se": av["moment_se"] / (q * c * c),
+               "blocks": av["blocks"], "measure_start": sim.info["measure_start"],
+               "recycled": int(s["recycled"]), "pushouts": int(s["pushouts"])}
+        if not int(sim.scene.values["gas.particles"]):
+            out["particles_note"] = (f"{sim.n_particles:,} particles (the {sim.backend} default; "
+                                     f"radius {sim.info['radius']:.3g} m)")
+        return out
+
+    def header(self, sim) -> dict[str, Any]:
+        p = sim.params
+        return {"container": {"type": "box", "min": list(p["channel_lo"]), "max": list(p["channel_hi"])},
+                "obstacles": [{"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
+                               "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"])}],
+                "bodies": [], "particles": sim.n_particles, "particle_radius": sim.info["radius"],
+                "mass": sim.info["mass"], "free_stream": [p["speed"], 0.0], "units": dict(self.units)}
+
+    def control(self, sim, speed_scale=0.0) -> dict[str, list[float]]:
+        """The re-entering free stream's speed is U (1 + speed_scale)."""
+        x = float(speed_scale)
+        if not math.isfinite(x) or x <= -1.0:
+            raise ValueError(f"speed_scale must be finite and > -1, got {speed_scale!r}")
+        return {"speed_scale": [x]}
+
+    def check_positions(self, sim, positions: np.ndarray) -> None:
+        lo, hi = np.asarray(sim.params["channel_lo"]), np.asarray(sim.params["channel_hi"])
+        out = np.flatnonzero(~np.all((positions >= lo) & (positions <= hi), axis=1))
+        if out.size:
+            raise ValueError(f"positions[{int(out[0])}] = {positions[int(out[0])].tolist()} is outside the channel")
+
+
+KIND = WindTunnel()

@@ -1,0 +1,221 @@
+"""The wind tunnel (seed 000): the scene loads and runs on every CPU backend (serial and
+OpenMP bitwise equal), the count is constant (recycling at the outflow), no particle ever
+ends inside the airfoil or outside the channel, the airfoil's force balances the particles'
+reaction (and matches a float64 NumPy reference), a head-on pair rebounds with the
+restitution dem.h predicts, a flat plate at 0 degrees has no lift and positive drag and lift
+follows the angle of attack, and the CLI runs it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from corpuscle import Simulation
+from corpuscle import _core
+from corpuscle.kinds import wind_tunnel as wt
+from corpuscle.scene import load_scene
+
+from cli_script import corpuscle
+
+
+def make(backend="cpu", particles=1500, **overrides):
+    ov = {"inflow.speed": 1.0}
+    ov.update({k.replace("__", "."): v for k, v in overrides.items()})
+    return Simulation.from_scene(load_scene("wind-tunnel"), backend=backend, particles=particles, overrides=ov)
+
+
+def channel(sim):
+    return np.asarray(sim.params["channel_lo"]), np.asarray(sim.params["channel_hi"])
+
+
+def test_registered_with_the_grid_index():
+    assert dict(_core.kinds())["wind-tunnel"] == ["grid"]
+    sim = make(particles=500)
+    assert sim.kind.dim == 2 and sim.n_particles == 500
+    assert sim.positions.shape == (500, 2)
+    h = sim.header()
+    assert h["dim"] == 2 and h["container"]["type"] == "box" and h["obstacles"][0]["type"] == "polygon"
+
+
+def test_default_particle_counts_follow_the_backend():
+    assert wt.DEFAULT_PARTICLES["cuda"] == 2_097_152 and wt.DEFAULT_PARTICLES["cpu"] == 131_072
+    b = wt.KIND.build(load_scene("wind-tunnel"), wt.Target("serial", "grid"))
+    assert b.params["n"] == 131_072
+    # the radius keeps the solid fraction: N pi r^2 = 0.1 of the free area
+    assert b.params["n"] * math.pi * b.params["radius"] ** 2 == pytest.approx(0.1 * b.info["free_area"], rel=1e-9)
+
+
+def test_serial_and_openmp_are_bitwise_equal():
+    a, b = make("serial"), make("cpu")
+    a.step(150)
+    b.step(150)
+    for name in ("position", "velocity", "id", "pressure", "force"):
+        assert np.array_equal(a.field(name), b.field(name)), name
+    sa, sb = a.scalars(), b.scalars()
+    for k in ("time", "airfoil_force", "airfoil_moment", "recycled", "blocks_lift"):
+        assert sa[k] == sb[k], k
+    assert sa["recycled"] > 0  # the comparison covers re-entered particles
+
+
+def test_count_constant_and_particles_recycled():
+    sim = make(particles=1000, inflow__speed=3.0)
+    n = sim.n_particles
+    lo, hi = channel(sim)
+    sim.step(800)  # 0.8 s at 3 m/s: most of the gas has crossed the outflow once
+    s = sim.state()
+    assert s["recycled"] > 0.5 * n
+    ids = np.sort(sim.field("id"))
+    assert np.array_equal(ids, np.arange(n))  # every particle still there, once
+    p = sim.positions
+    assert len(p) == n and np.all((p >= lo) & (p <= hi))
+
+
+@pytest.mark.parametrize("shape,aoa,speed", [("e398", 10.0, 2.0), ("flat-plate", 20.0, 4.0), ("naca2412", -5.0, 2.0)])
+def test_no_particle_inside_the_airfoil_or_outside_the_channel(shape, aoa, speed):
+    sim = make(particles=3000, airfoil__shape=shape, airfoil__angle_of_attack=aoa, inflow__speed=speed,
+               inflow__thermal=0.5)
+    poly = sim.info["airfoil"]
+    lo, hi = channel(sim)
+    touched = 0
+    for _ in range(15):
+        sim.step(20)
+        p = sim.positions.astype(np.float64)
+        assert np.all((p >= lo) & (p <= hi))
+        d = wt.signed_distance(poly, p)
+        assert d.min() > 0.0, f"a particle is inside the airfoil (sdf {d.min():.3g})"
+        touched += int(np.sum(d < sim.radius))
+    assert touched > 0  # the airfoil was hit
+
+
+def _reference_airfoil_force(sim):
+    """float64 NumPy: the spring-dashpot force of the airfoil on every particle within a
+    radius of it, and the reaction on the airfoil (force, moment about the quarter chord)."""
+    p = sim.positions.astype(np.float64)
+    v = sim.velocities.astype(np.float64)
+    poly = sim.info["airfoil"]
+    r = sim.radius
+    k, c = sim.params["k_wing"], sim.params["c_wing"]
+    F, M = np.zeros(2), 0.0
+    a, b = poly, np.roll(poly, -1, axis=0)
+    qc = np.asarray(sim.params["quarter_chord"])
+    near = np.flatnonzero(np.abs(wt.signed_distance(poly, p)) < r)
+    for i in near:
+        e = b - a
+        t = np.clip(np.einsum("ij,ij->i", p[i] - a, e) / np.einsum("ij,ij->i", e, e), 0, 1)
+        q = a + t[:, None] * e
+        d = np.linalg.norm(p[i] - q, axis=1)
+        j = int(np.argmin(d))
+        n = (p[i] - q[j]) / d[j]
+        f = (k * (r - d[j]) - c * (v[i] @ n)) * n
+        F -= f
+        rr = q[j] - qc
+        M += rr[0] * (-f[1]) - rr[1] * (-f[0])
+    return F, M, len(near)
+
+
+def test_momentum_balance_airfoil_force_is_minus_the_reaction():
+    sim = make(particles=6000, inflow__speed=1.0)
+    checked = 0
+    for _ in range(6):
+        sim.step(40)
+        sim.evaluate()  # forces of the current state, as the fields hold it
+        s = sim.scalars()
+        F_air = np.asarray(s["airfoil_force"], dtype=np.float64)
+        F_wall = np.asarray(s["wall_force"], dtype=np.float64)
+        total = np.asarray(s["total_force"], dtype=np.float64)
+        per_particle = sim.field("force").astype(np.float64).sum(axis=0)
+        scale = np.abs(sim.field("force")).sum() + 1e-9
+        # pair forces cancel: what the particles feel in all is the walls' minus the airfoil's reaction
+        assert np.allclose(total, F_wall - F_air, atol=2e-5 * scale)
+        assert np.allclose(per_particle, total, atol=2e-5 * scale)
+        F_ref, M_ref, n_near = _reference_airfoil_force(sim)
+        assert n_near == s["airfoil_contacts"]
+        assert np.allclose(F_air, F_ref, rtol=2e-3, atol=1e-4 * (np.abs(F_ref).sum() + 1))
+        assert s["airfoil_moment"] == pytest.approx(M_ref, rel=2e-3, abs=1e-4 * (abs(M_ref) + 1))
+        checked += n_near > 0
+    assert checked >= 3
+
+
+@pytest.mark.parametrize("integrator", ["forward-euler", "symplectic-euler"])
+@pytest.mark.parametrize("restitution", [0.0, 0.8])
+def test_head_on_pair_restitution(integrator, restitution):
+    r = 0.01
+    sim = make(particles=2, gas__radius=r, timestep__dt_max=2e-5, timestep__integrator=integrator,
+               contact__restitution=restitution)
+    x0, y0, u = 1.0, 0.5, 0.1
+    sim.set_particles([[x0 - 1.2 * r, y0], [x0 + 1.2 * r, y0]], [[u, 0.0], [-u, 0.0]])
+    m = sim.params["mass"]
+    e_theory = wt.restitution(sim.params["k"], sim.params["c"], m / 2)
+    assert sim.scalars()["restitution_pp"] == pytest.approx(e_theory, rel=1e-5)
+    if restitution:
+        assert e_theory == pytest.approx(restitution, rel=1e-5)
+    t_c = math.pi / math.sqrt(sim.params["k"] / (m / 2) - (sim.params["c"] / m) ** 2)
+    sim.step(int((0.4 * r / u + 2 * t_c) / 2e-5))
+    ids, v = sim.field("id"), sim.velocities.astype(np.float64)
+    v = v[np.argsort(ids)]
+    e = -(v[1, 0] - v[0, 0]) / (-2 * u)
+    assert e == pytest.approx(e_theory, abs=0.01)
+    assert np.abs(v[:, 1]).max() < 1e-6
+    assert v[0, 0] + v[1, 0] == pytest.approx(0.0, abs=1e-6)  # momentum
+
+
+def _mean_lift_drag(aoa, particles=8000, steps=2500):
+    sim = make(particles=particles, airfoil__shape="flat-plate", airfoil__angle_of_attack=aoa,
+               airfoil__leading_edge=[-0.6, 0.0], inflow__speed=1.0, run__end_time=steps * 1e-3,
+               measure__start=0.3)
+    sim.run(until=steps * 1e-3, chunk=500)
+    res = sim.result()
+    return res
+
+
+def test_flat_plate_lift_sign_and_drag():
+    zero, up, down = _mean_lift_drag(0.0), _mean_lift_drag(8.0), _mean_lift_drag(-8.0)
+    assert zero["blocks"] >= 16
+    assert zero["drag"] > 0 and up["drag"] > 0 and down["drag"] > 0
+    # no lift at zero incidence (within the sampling error and well below the drag)
+    assert abs(zero["lift"]) < max(4 * zero["lift_se"], 0.05 * zero["drag"])
+    # lift follows the angle of attack at small angles
+    assert up["lift"] > 4 * up["lift_se"] and down["lift"] < -4 * down["lift_se"]
+    assert up["cl"] > zero["cl"] > down["cl"]
+
+
+def test_cli_runs_it(tmp_path):
+    proc = corpuscle("run", "wind-tunnel", "--particles", 2000, "--steps", 50, "--backend", "cpu", cwd=tmp_path,
+                     timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "wind-tunnel" in proc.stdout and "2,000" in proc.stdout
+    assert "steady part starts" in proc.stdout or "C_L" in proc.stdout
+
+
+def test_checkpoint_resumes_bitwise():
+    a = make(particles=800, run__end_time=1.0, measure__start=0.02)
+    a.run(until=1.0, steps=60)
+    ck = a.checkpoint()
+    b = Simulation(a.scene, backend="cpu", checkpoint=ck)
+    a.step(60)
+    b.step(60)
+    for name in ("position", "velocity", "id"):
+        assert np.array_equal(a.field(name), b.field(name)), name
+    sa, sb = a.scalars(), b.scalars()
+    assert sa["nblocks"] > 0
+    for k in ("time", "step", "recycled", "blocks_lift", "block_lift_sum"):
+        assert sa[k] == sb[k], k
+
+
+def test_speed_scale_control_changes_the_reentering_stream():
+    sim = make(particles=800, inflow__speed=2.0)
+    sim.set_control(speed_scale=0.5)
+    sim.step(400)
+    ids = sim.field("id")
+    v = sim.velocities
+    x = sim.positions[:, 0]
+    lo, _ = channel(sim)
+    # particles that re-entered recently sit near the inflow, most still at 1.5 U (some have
+    # already hit the slower gas ahead of them)
+    fresh = x < lo[0] + 0.05
+    assert fresh.sum() >= 5 and np.mean(np.abs(v[fresh, 0] - 3.0) < 1e-5) > 0.5
+    with pytest.raises(ValueError):
+        sim.set_control(speed_scale=-1.0)
+    assert len(np.unique(ids)) == sim.n_particles
