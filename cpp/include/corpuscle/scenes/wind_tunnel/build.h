@@ -63,7 +63,8 @@ template <class Exec, class Index>
 std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
   using P = Pipeline<std::decay_t<Exec>, Index>;
   auto m = std::make_unique<Model>(build_model(*r.params, r.arrays));  // 32 KiB: not on the stack
-  auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), *m, P::initial_record(*m), r.device);
+  auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), *m, std::vector<typename P::SceneRecord>{P::initial_record(*m)},
+                                                              r.device);
   for (const char* name : {"position", "velocity"}) {
     if (!r.arrays || !r.arrays->has(name)) throw Error(std::string("wind-tunnel: no initial ") + name + " array");
     ArrayView a = r.arrays->get(name);

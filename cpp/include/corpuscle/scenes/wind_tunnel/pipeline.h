@@ -108,6 +108,7 @@ class Pipeline {
   }
 
   long long particles() const { return m_.n; }
+  int scenes() const { return 1; }  // one scene per state (a batch of one)
   const Model& model() const { return m_; }
   int graph_slot() const { return parity_; }
 
