@@ -204,6 +204,9 @@ class WindTunnel(Kind):
                              f"(over {result['blocks']} blocks from t = {result['measure_start']:.4g} s)")
             else:
                 lines.append(f"no forces averaged yet (the steady part starts at t = {result['measure_start']:.4g} s)")
+                # nothing measured: the means and their errors are not printed as nan rows
+                for k in ("lift", "drag", "moment", "lift_se", "drag_se", "moment_se"):
+                    rest.pop(k, None)
             for k in ("cl", "cd", "cm", "cl_se", "cd_se", "cm_se"):
                 rest.pop(k, None)
         if "particles_note" in result:
