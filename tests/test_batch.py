@@ -108,3 +108,30 @@ def test_scenes_stop_on_their_own_and_the_batch_when_all_have():
         together.scalars(2)
     with pytest.raises(ValueError, match="not supported yet"):
         together.checkpoint()
+
+
+def test_scalars_and_controls_of_every_scene_at_once():
+    builds = [built(1), built(2), built(3)]
+    together = batch(builds)
+    together.set_end_time(1e9)
+    acc = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [0.0, -5.0, 0.0]])
+    together.set_control_of_scenes("acceleration", acc)
+    together.step(15)
+    pos = together.scalar_of_scenes("die_position")
+    assert pos.shape == (3, 3) and pos.dtype == np.float32
+    t = together.scalar_of_scenes("time")
+    assert t.shape == (3,) and t.dtype == np.float64
+    for s in range(3):
+        assert pos[s].tolist() == together.scalars(s)["die_position"]
+        assert t[s] == together.scalars(s)["time"]
+    # each scene got its own row: the same as setting it scene by scene
+    ref = batch(builds)
+    ref.set_end_time(1e9)
+    for s in range(3):
+        ref.set_control({"acceleration": acc[s].tolist()}, s)
+    ref.step(15)
+    assert np.array_equal(ref.scalar_of_scenes("die_position"), pos)
+    with pytest.raises(ValueError, match=r"acceleration must be a \(3, 3\) array"):
+        together.set_control_of_scenes("acceleration", np.zeros((2, 3)))
+    with pytest.raises(ValueError, match=r"acceleration\[1\] must be finite"):
+        together.set_control_of_scenes("acceleration", np.array([[0, 0, 0], [np.nan, 0, 0], [0, 0, 0]], float))

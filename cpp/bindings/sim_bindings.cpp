@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 
 #include "corpuscle/core/error.h"
@@ -267,6 +268,44 @@ void bind_sim(nb::module_& m) {
              return d;
            }, nb::arg("scene") = 0,
            "The scalars of a scene's record as of the last step, and the values the kind derives.")
+      .def("scalar_of_scenes", [](PySim& s, const std::string& name) {
+             // one scalar of every scene's record: (scenes,) or (scenes, count), the record's dtype
+             for (const ScalarInfo& x : s.sim->scalars()) {
+               if (x.name != name) continue;
+               const int B = s.sim->scenes();
+               const size_t item = dtype_size(x.dtype) * size_t(x.count);
+               std::vector<unsigned char> bytes(item * size_t(B));
+               for (int k = 0; k < B; ++k) std::memcpy(bytes.data() + item * k, s.sim->scene_record(k) + x.offset, item);
+               FieldInfo f{x.name, "scene", x.dtype, x.count, false, false};
+               return owned(std::move(bytes), f, B);
+             }
+             throw nb::key_error(("unknown scalar '" + name + "'").c_str());
+           }, nb::arg("name"), "One scalar of every scene (a host array: one row per scene).")
+      .def("set_control_of_scenes", [](PySim& s, const std::string& name,
+                                       nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> values) {
+             // one control input for every scene at once: values (scenes, count)
+             for (const ScalarInfo& x : s.sim->controls()) {
+               if (x.name != name) continue;
+               const int B = s.sim->scenes();
+               if (x.dtype != DType::F32) throw nb::value_error((name + ": only float controls are set by array").c_str());
+               if (int(values.shape(0)) != B || int(values.shape(1)) != x.count)
+                 throw nb::value_error((name + " must be a (" + std::to_string(B) + ", " + std::to_string(x.count) +
+                                        ") array of numbers").c_str());
+               for (int k = 0; k < B; ++k) {
+                 std::vector<float> row(size_t(x.count));
+                 for (int c = 0; c < x.count; ++c) {
+                   double v = values(k, c);
+                   if (!std::isfinite(v))
+                     throw nb::value_error((name + "[" + std::to_string(k) + "] must be finite").c_str());
+                   row[c] = float(v);
+                 }
+                 s.sim->set_control(name, row.data(), k);
+               }
+               return;
+             }
+             throw nb::key_error(("unknown control '" + name + "'").c_str());
+           }, nb::arg("name"), nb::arg("values"),
+           "Set one control input of every scene: values (scenes, count), float64; no rebuild.")
       .def("set_scalar", [](PySim& s, const std::string& name, nb::handle value, int scene) {
              for (const ScalarInfo& x : s.sim->scalars())
                if (x.name == name) {
