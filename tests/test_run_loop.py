@@ -116,15 +116,36 @@ def _reason(sim):
     return st["bad"], st["bad_step"], sim.check_health()
 
 
-def test_neighbour_overflow_is_found_before_the_step_is_taken():
+def test_a_list_overflow_grows_the_lists_and_repeats_the_step():
     sim = small(n=2000)
-    assert sim.params["max_neighbors"] < 2000
+    caps = sim.params["max_neighbors"], sim.params["max_near"]
+    assert caps[0] < 2000
     x = sim.field("position", copy=True)
     sim.set_particles(x * 0.05)  # everything within 7.5 mm: far more neighbours than a list holds
-    assert sim.step(10) == 0
-    bad, step, msg = _reason(sim)
-    assert bad == 4 and step == 1 and sim.steps == 0
-    assert msg == f"unstable at step 1: {UNSTABLE_REASONS[4]}"
+    # the overflowing step is not taken: the lists grow to hold every neighbour found and the
+    # step is repeated, so the run goes on (here until the compressed blob flies apart)
+    taken = sim.step(3)
+    st = sim.core.scalars()
+    assert taken >= 1 and sim.steps == taken
+    assert st["max_neighbors"] > caps[0] and st["max_near"] > caps[1]
+    assert st["bad"] != 4
+
+
+def test_an_evaluation_that_overflows_grows_the_lists_and_lists_every_neighbour():
+    x = small(n=2000).field("position", copy=True) * 0.05
+    lists, ref = small(n=2000), small(n=2000, neighbors="allpairs")
+    for sim in (lists, ref):
+        sim.set_particles(x)
+        sim.evaluate()
+    assert lists.state()["bad"] == 0 and lists.core.scalars()["max_neighbors"] > lists.params["max_neighbors"]
+    # every neighbour was listed: the densities are those of all pairs (to float rounding)
+    ids_l, ids_r = lists.field("id", copy=True), ref.field("id", copy=True)
+    rho_l, rho_r = np.empty(2000), np.empty(2000)
+    rho_l[ids_l] = lists.field("density", copy=True)
+    rho_r[ids_r] = ref.field("density", copy=True)
+    np.testing.assert_allclose(rho_l, rho_r, rtol=1e-5)
+    # and the run goes on from there
+    assert lists.step(1) == 1
 
 
 @pytest.mark.parametrize("speed, code, taken", [(1e20, 1, 0), (5e3, 3, 1)])

@@ -301,6 +301,7 @@ struct CpuExec {
   // a whole step: CPU runs it directly
   template <class F>
   void launch_step(int /*parity*/, const F& enqueue) { enqueue(); }
+  void reset_graphs() {}  // nothing is captured on the CPU
 
   // stage timing: host clock (the CPU work is synchronous)
   void profile_begin() { prof_ = true; t_last_ = clock::now(); }

@@ -607,6 +607,16 @@ struct CudaExec {
   }
 
   void set_graphs(bool on) { graphs_ = on; }
+  // forget the captured steps (a buffer they name was reallocated): the next steps run
+  // eagerly once per parity and are captured again
+  void reset_graphs() {
+    synchronize();
+    for (int p = 0; p < 2; ++p) {
+      if (graph_[p]) CPS_CUDA_CHECK(cudaGraphExecDestroy(graph_[p]));
+      graph_[p] = nullptr;
+      eager_[p] = 0;
+    }
+  }
 
  private:
   static int current_device() {

@@ -28,7 +28,8 @@ DIE_FACES = {1: (1, 0, 0), 6: (-1, 0, 0), 2: (0, 1, 0), 5: (0, -1, 0), 3: (0, 0,
 UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)",
                     2: "the die's state became non-finite (NaN/inf)",
                     3: "a particle moved faster than 100 times the sound speed",
-                    4: "a particle had more neighbours than its list holds (the fluid collapsed)"}
+                    4: "a particle had more neighbours than its list holds and the lists could not grow "
+                       "(not enough memory)"}
 
 # ---------------------------------------------------------------------------
 # the scene schema

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/sim/registry.h"
 #include "corpuscle/sim/sim.h"
 
 namespace cps {
@@ -54,30 +55,42 @@ class SimImpl final : public Sim {
 
   long long step(long long n, const StopCheck& stop) override {
     if (n <= 0) return 0;
-    if (all_halted(records().data())) return 0;
+    if (all_halted(records().data()) && !recover()) return 0;
     std::vector<long long> first;
     for (const Record& r : rec_) first.push_back(r.clock.step);
     const int batch = Exec::on_device ? kPollBatch : 1;
     flush_control();
-    int slot = 0;
-    bool pending = false;
-    rec_valid_ = false;
-    for (long long k = 0; k < n;) {
-      const long long b = std::min<long long>(batch, n - k);
-      for (long long j = 0; j < b; ++j) {
-        p_.prepare();
-        ex_.launch_step(p_.graph_slot(), [&] { p_.enqueue(true); });
-        p_.advance(true);
+    bool stopped = false;
+    for (long long k = 0; k < n && !stopped;) {
+      int slot = 0;
+      bool pending = false;
+      rec_valid_ = false;
+      while (k < n) {
+        const long long b = std::min<long long>(batch, n - k);
+        for (long long j = 0; j < b; ++j) {
+          p_.prepare();
+          ex_.launch_step(p_.graph_slot(), [&] { p_.enqueue(true); });
+          p_.advance(true);
+        }
+        k += b;
+        ex_.poll_begin(slot, record_.data(), sizeof(Record) * rec_.size());
+        if (pending || !Exec::on_device) {
+          const int seen = Exec::on_device ? slot ^ 1 : slot;
+          if (all_halted(static_cast<const Record*>(ex_.poll_wait(seen)))) break;
+        }
+        pending = true;
+        slot ^= 1;
+        if (stop && stop()) {
+          stopped = true;
+          break;
+        }
       }
-      k += b;
-      ex_.poll_begin(slot, record_.data(), sizeof(Record) * rec_.size());
-      if (pending || !Exec::on_device) {
-        const int seen = Exec::on_device ? slot ^ 1 : slot;
-        if (all_halted(static_cast<const Record*>(ex_.poll_wait(seen)))) break;
-      }
-      pending = true;
-      slot ^= 1;
-      if (stop && stop()) break;
+      // a fixed-capacity buffer that overflowed stopped its scene before the step was taken:
+      // the pipeline grows it when it can, and the steps go on (the step is repeated)
+      if (stopped || !all_halted(records().data()) || !recover() || all_halted(rec_.data())) break;
+      // the budget counts steps taken, not the no-ops launched after the fault
+      k = 0;
+      for (size_t q = 0; q < rec_.size(); ++q) k = std::max(k, rec_[q].clock.step - first[q]);
     }
     // the steps taken: those of the scene that took the most
     long long taken = 0;
@@ -98,10 +111,14 @@ class SimImpl final : public Sim {
       write_records(r);
     }
     flush_control();
-    p_.prepare();
-    ex_.launch_step(-1, [&] { p_.enqueue(false); });
-    p_.advance(false);
-    rec_valid_ = false;
+    for (int attempt = 0;; ++attempt) {
+      p_.prepare();
+      ex_.launch_step(-1, [&] { p_.enqueue(false); });
+      p_.advance(false);
+      rec_valid_ = false;
+      // an overflowing buffer grows and the evaluation is repeated (a few times at most)
+      if (attempt == 3 || !recover()) break;
+    }
     if (lift) {
       std::vector<Record> r = records();
       for (size_t k = 0; k < r.size(); ++k) {
@@ -239,6 +256,15 @@ class SimImpl final : public Sim {
 
  private:
   static bool halted(const Record& r) { return r.clock.done != 0 || r.clock.bad != 0; }
+  // a fixed-capacity buffer that overflowed stopped its scene before the step was taken: the
+  // pipeline grows it when it can (clearing the flags it handled) and the step is repeated
+  bool recover() {
+    std::vector<Record> r = records();
+    if (!p_.recover(r, bytes_available(backend(), device_))) return false;
+    write_records(r);
+    ex_.reset_graphs();
+    return true;
+  }
   bool all_halted(const Record* r) const {
     for (size_t k = 0; k < rec_.size(); ++k)
       if (!halted(r[k])) return false;

@@ -129,6 +129,49 @@ class Pipeline {
     return s;
   }
 
+  // A list overflow stops a scene before its step is taken (kBadNeighbors); the lists then
+  // grow to 1.25 times the largest count found (the counts are the true ones, past the
+  // capacity) and every scene relists: the engine clears the flags and repeats the step.
+  // False (the run stops) when nothing overflowed or the larger lists would not fit in
+  // `bytes_free`.
+  bool recover(std::vector<Scene>& recs, double bytes_free) {
+    if constexpr (!Index::lists) {
+      return false;
+    } else {
+      bool overflow = false;
+      for (const Scene& r : recs) overflow = overflow || r.clock.bad == kBadNeighbors;
+      if (!overflow) return false;
+      const int n = total_fluid(m_);
+      std::vector<int> counts(n), kept(n);
+      ex_.synchronize();
+      ex_.to_host(counts.data(), nbr_count_.data(), n * sizeof(int));
+      ex_.to_host(kept.data(), near_count_.data(), n * sizeof(int));
+      auto grown = [n](int cap, int need) {
+        long long want = (long long)(1.25 * need) + 32;
+        long long all = 2LL * n;  // every particle and ghost of the state
+        want = std::min(want, all);
+        want = (want + 31) / 32 * 32;
+        return int(std::max<long long>(cap, want));
+      };
+      Model m = m_;
+      m.max_neighbors = grown(m_.max_neighbors, *std::max_element(counts.begin(), counts.end()));
+      m.max_near = grown(m_.max_near, *std::max_element(kept.begin(), kept.end()));
+      if (m.max_neighbors == m_.max_neighbors && m.max_near == m_.max_near) return false;
+      if (bytes_needed(m) - bytes_needed(m_) > bytes_free) return false;
+      m_ = m;
+      ex_.to_device(model_.data(), &m_, sizeof(Model));
+      nbr_.resize(list_slots(m_));
+      near_.resize(near_slots(m_));
+      invalidate(false);  // every scene sorts and relists
+      for (Scene& r : recs)
+        if (r.clock.bad == kBadNeighbors) {  // the step was not taken: it is repeated
+          r.clock.bad = 0;
+          r.clock.bad_step = -1;
+        }
+      return true;
+    }
+  }
+
   // a restored record: its scratch starts clean (the first step sorts and relists)
   static void restored(Scene& r) {
     r.rebuild[0] = r.rebuild[1] = 0;
@@ -256,6 +299,8 @@ class Pipeline {
             {"vmax", std::sqrt(double(r.sums.vmax2))},
             {"amax", std::sqrt(double(r.sums.amax2))},
             {"mean_density", double(r.sums.rho_sum) / double(m_.n_fluid)},
+            {"max_neighbors", double(m_.max_neighbors)},  // the list capacities now (they grow)
+            {"max_near", double(m_.max_near)},
             {"die_angular_velocity_x", double(w[0])},
             {"die_angular_velocity_y", double(w[1])},
             {"die_angular_velocity_z", double(w[2])}};

@@ -109,6 +109,9 @@ class Pipeline {
 
   long long particles() const { return m_.n; }
   int scenes() const { return 1; }  // one scene per state (a batch of one)
+  // nothing of this kind grows on a fault: an unsound step stops the run
+  template <class R>
+  bool recover(std::vector<R>&, double) { return false; }
   const Model& model() const { return m_; }
   int graph_slot() const { return parity_; }
 
