@@ -131,6 +131,18 @@ def test_a_list_overflow_grows_the_lists_and_repeats_the_step():
     assert st["bad"] != 4
 
 
+def test_a_list_overflow_that_cannot_grow_stops_before_the_step_is_taken():
+    # lists capped at 1 MB (sph.max_list_memory): the grown lists would not fit
+    sim = small(n=2000, overrides={"sph.max_list_memory": 1.0})
+    x = sim.field("position", copy=True)
+    sim.set_particles(x * 0.05)
+    assert sim.step(10) == 0
+    bad, step, msg = _reason(sim)
+    assert bad == 4 and step == 1 and sim.steps == 0
+    assert msg == f"unstable at step 1: {UNSTABLE_REASONS[4]}"
+    assert sim.core.scalars()["max_neighbors"] == sim.params["max_neighbors"]
+
+
 def test_an_evaluation_that_overflows_grows_the_lists_and_lists_every_neighbour():
     x = small(n=2000).field("position", copy=True) * 0.05
     lists, ref = small(n=2000), small(n=2000, neighbors="allpairs")

@@ -74,6 +74,8 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "sph.reference_particles": _K("int", 3500, "", 1, INT32_MAX, "particle count at which sph.h applies"),
     "sph.skin": _K("float", 0.2, "h", 0.0, 1.0,
                    "neighbour-list skin: lists reach h (1 + skin) and are reused until a particle moved too far; 0 rebuilds every step"),
+    "sph.max_list_memory": _K("float", 0.0, "MB", 0.0, 1e9,
+                              "most memory the neighbour lists may grow to when they overflow; 0: what the backend has free"),
     # gravity
     "gravity.g": _K("vec3", [0.0, 0.0, -9.81], "m/s²", -1e4, 1e4, "gravitational acceleration"),
     # rigid cube die
@@ -244,6 +246,7 @@ class Magic8Ball(Kind):
 
         params["max_neighbors"] = capacity(list_radius)
         params["max_near"] = capacity(h)
+        params["max_list_bytes"] = float(v["sph.max_list_memory"]) * 1e6
         params["die_initial"] = {"position": die_pos.tolist(), "velocity": [0.0] * 3,
                                  "orientation": die_q.tolist(), "angular_velocity": [0.0] * 3}
         # before the (costly) placement and any allocation

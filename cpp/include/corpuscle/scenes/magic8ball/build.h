@@ -28,6 +28,7 @@ inline Model build_model(const ParamSource& p) {
   m.kern = SphKernels<D>::make(m.h);
   m.max_neighbors = int(p.integer("max_neighbors"));
   m.max_near = int(p.integer("max_near"));
+  m.max_list_bytes = p.has("max_list_bytes") ? p.number("max_list_bytes") : 0.0;
   m.list_radius = p.f("list_radius");
   m.rebuild_disp2 = p.f("rebuild_distance") * p.f("rebuild_distance");
   m.c0 = tait_sound_speed(m.sph);

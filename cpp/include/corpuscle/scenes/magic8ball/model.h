@@ -30,6 +30,7 @@ struct Model {
   int n_scenes;          // independent scenes of the same model in one state (1: a single run)
   int max_neighbors;     // neighbour list capacity per particle (within the list radius)
   int max_near;          // capacity of the per-step list of neighbours within h
+  double max_list_bytes; // the lists may grow to this on overflow (0: what the backend has free)
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
   float h;               // smoothing length

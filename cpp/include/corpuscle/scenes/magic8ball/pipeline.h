@@ -158,6 +158,8 @@ class Pipeline {
       m.max_near = grown(m_.max_near, *std::max_element(kept.begin(), kept.end()));
       if (m.max_neighbors == m_.max_neighbors && m.max_near == m_.max_near) return false;
       if (bytes_needed(m) - bytes_needed(m_) > bytes_free) return false;
+      const double list_bytes = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
+      if (m_.max_list_bytes > 0.0 && list_bytes > m_.max_list_bytes) return false;
       m_ = m;
       ex_.to_device(model_.data(), &m_, sizeof(Model));
       nbr_.resize(list_slots(m_));
