@@ -63,3 +63,30 @@ print("frames", len(a), len(b), "steps", list(a.steps), list(b.steps))
 same = all(np.array_equal(a[i][k], b[i][k]) for i in range(len(a)) for k in ("position", "velocity", "density"))
 print("cuda resume bit-identical:", same)
 PY
+say wind-tunnel and a batch of two on CUDA against the CPU
+python3 - <<'PY' | tee -a "$log"
+import numpy as np, corpuscle
+from corpuscle import _core
+from corpuscle.kinds import Target, registry
+from corpuscle.scene import load_scene
+# wind tunnel: the first steps on CUDA against the CPU (positions by id)
+def by_id(sim, name):
+    ids = sim.field("id", copy=True); v = sim.field(name, copy=True); out = np.empty_like(v); out[ids] = v; return out
+w = {b: corpuscle.Simulation.from_scene("wind-tunnel", backend=b, particles=20000) for b in ("cpu", "cuda")}
+for s in w.values(): s.set_end_time(1e9); s.step(20)
+print("wind-tunnel cuda-cpu max position difference after 20 steps:",
+      float(np.abs(by_id(w["cuda"], "position") - by_id(w["cpu"], "position")).max()))
+# magic8ball batch of two on CUDA against two single CUDA runs
+kind = registry()["magic8ball"]
+def build(seed):
+    return kind.build(load_scene("magic8ball", {"fluid.particles": 1000, "run.seed": seed}), Target("cuda", "lists"), None)
+b1, b2 = build(1), build(2)
+params = dict(b1.params, n_scenes=2, die_initial_scenes=[b1.params["die_initial"], b2.params["die_initial"]])
+arrays = {k: np.ascontiguousarray(np.concatenate([b1.arrays[k], b2.arrays[k]])) for k in ("position", "velocity")}
+batch = _core.Simulation("magic8ball", "cuda", "lists", params, arrays); batch.evaluate()
+singles = [_core.Simulation("magic8ball", "cuda", "lists", b.params, b.arrays) for b in (b1, b2)]
+for s in (batch, *singles): s.evaluate(); s.set_end_time(1e9); s.step(100)
+for k, s in enumerate(singles):
+    d = np.abs(np.array(batch.scalars(k)["die_position"]) - np.array(s.scalars(0)["die_position"])).max()
+    print(f"batch scene {k} die position vs its single CUDA run after 100 steps: {d:.3e}")
+PY
