@@ -29,6 +29,19 @@ CPS_HD CPS_INLINE float fpow(float x, float y) {
   return std::pow(x, y);
 #endif
 }
+// log, exp, cos, sin: the CUDA intrinsic on the device, the C++ library on the host
+#ifdef __CUDA_ARCH__
+#define CPS_UNARY_MATH(name, device_fn, host_fn) \
+  CPS_HD CPS_INLINE float name(float x) { return ::device_fn(x); }
+#else
+#define CPS_UNARY_MATH(name, device_fn, host_fn) \
+  CPS_HD CPS_INLINE float name(float x) { return host_fn(x); }
+#endif
+CPS_UNARY_MATH(flog, logf, std::log)
+CPS_UNARY_MATH(fexp, expf, std::exp)
+CPS_UNARY_MATH(fcos, cosf, std::cos)
+CPS_UNARY_MATH(fsin, sinf, std::sin)
+#undef CPS_UNARY_MATH
 CPS_HD CPS_INLINE float fmin2(float a, float b) { return a < b ? a : b; }
 CPS_HD CPS_INLINE float fmax2(float a, float b) { return a > b ? a : b; }
 CPS_HD CPS_INLINE float fclamp(float x, float lo, float hi) { return fmin2(fmax2(x, lo), hi); }

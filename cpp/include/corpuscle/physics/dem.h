@@ -36,20 +36,6 @@ struct SpringDashpot {
   float c;  // damping (force per unit normal approach speed)
 };
 
-CPS_HD CPS_INLINE float flog(float x) {
-#ifdef __CUDA_ARCH__
-  return ::logf(x);
-#else
-  return std::log(x);
-#endif
-}
-CPS_HD CPS_INLINE float fexp(float x) {
-#ifdef __CUDA_ARCH__
-  return ::expf(x);
-#else
-  return std::exp(x);
-#endif
-}
 
 // reduced mass of a pair; a wall (or the airfoil) is infinitely heavy: pass m2 <= 0
 CPS_HD CPS_INLINE float effective_mass(float m1, float m2) { return m2 > 0.0f ? m1 * m2 / (m1 + m2) : m1; }

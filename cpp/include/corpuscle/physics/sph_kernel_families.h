@@ -44,15 +44,6 @@ namespace cps {
 enum class SphKernelKind : int { Poly6 = 0, Spiky = 1, Viscosity = 2, CubicSpline = 3, WendlandC2 = 4 };
 constexpr int kSphKernelKinds = 5;
 
-namespace sph_detail {
-CPS_HD CPS_INLINE float flog(float x) {
-#ifdef __CUDA_ARCH__
-  return ::logf(x);
-#else
-  return std::log(x);
-#endif
-}
-}  // namespace sph_detail
 
 // the constants every kernel carries: support h, h^2, W's normalisation c, grad W's gc
 struct SphKernelConsts {
@@ -154,7 +145,7 @@ struct KernelFormula<D, SphKernelKind::Viscosity> {
         float e3 = e * e * e;
         return k.c * h3 * (e3 * (1.0f + e * s)) * (1.0f / 6.0f);
       }
-      return k.c * h3 * (q * q * (0.25f - q * (1.0f / 9.0f)) - 5.0f / 36.0f - sph_detail::flog(q) * (1.0f / 6.0f));
+      return k.c * h3 * (q * q * (0.25f - q * (1.0f / 9.0f)) - 5.0f / 36.0f - flog(q) * (1.0f / 6.0f));
     }
   }
   // 3-D: grad W = -c (h - r)^2 (h^2 + 2 h r + 3 r^2) / (2 h^3 r^3) d

@@ -5,6 +5,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
+
+#include "corpuscle/core/atomics.h"
 
 namespace cps {
 
@@ -49,5 +52,53 @@ struct Clock {
   int bad;             // why the run is unsound (a kind's code), 0 while it is sound
   long long bad_step;  // the step that went bad
 };
+
+// the clock's rows of a kind's scalar table (X(name, C type, count, member, checkpointed))
+#define CPS_CLOCK_SCALARS(X)                       \
+  X(time, double, 1, clock.time, true)             \
+  X(end_time, double, 1, clock.end_time, false)    \
+  X(step, long long, 1, clock.step, true)          \
+  X(dt, float, 1, clock.dt, true)                  \
+  X(done, int, 1, clock.done, false)               \
+  X(bad, int, 1, clock.bad, false)                 \
+  X(bad_step, long long, 1, clock.bad_step, false)
+
+// a scene whose run is over (end time reached) or unsound: its steps are no-ops
+template <class Record>
+CPS_HD CPS_INLINE bool halted(const Record* g) {
+  return g->clock.done != 0 || g->clock.bad != 0;
+}
+
+// raise an instability reason: the first one raised stays (each stage raises one reason, so
+// the kept reason is that of the earliest stage that found a fault)
+CPS_HD CPS_INLINE void raise_first(int* p, int code) { atomic_cas(p, 0, code); }
+
+// a kind's three tables from its X-macro lists (inside its Pipeline: Record and Control are
+// the per-scene record and the control; see scenes/magic8ball/tables.h for the columns)
+#define CPS_KIND_TABLES(FIELDS, SCALARS, CONTROLS, Record, Control)                                             \
+  static std::vector<FieldInfo> field_table() {                                                                 \
+    std::vector<FieldInfo> t;                                                                                   \
+    FIELDS(CPS_TABLE_FIELD_)                                                                                    \
+    return t;                                                                                                   \
+  }                                                                                                             \
+  static std::vector<ScalarInfo> scalar_table() {                                                               \
+    std::vector<ScalarInfo> t;                                                                                  \
+    Record s{};                                                                                                 \
+    const char* base = reinterpret_cast<const char*>(&s);                                                       \
+    SCALARS(CPS_TABLE_SCALAR_)                                                                                  \
+    return t;                                                                                                   \
+  }                                                                                                             \
+  static std::vector<ScalarInfo> control_table() {                                                              \
+    std::vector<ScalarInfo> t;                                                                                  \
+    Control s{};                                                                                                \
+    const char* base = reinterpret_cast<const char*>(&s);                                                       \
+    CONTROLS(CPS_TABLE_CONTROL_)                                                                                \
+    return t;                                                                                                   \
+  }
+#define CPS_TABLE_FIELD_(name, T, comps, group, ckpt, settable, storage, count) \
+  t.push_back(FieldInfo{#name, group, dtype_of<T>(), comps, ckpt, settable});
+#define CPS_TABLE_SCALAR_(name, T, count, member, ckpt) \
+  t.push_back(ScalarInfo{#name, dtype_of<T>(), count, size_t(reinterpret_cast<const char*>(&s.member) - base), ckpt});
+#define CPS_TABLE_CONTROL_(name, T, count, member) CPS_TABLE_SCALAR_(name, T, count, member, false)
 
 }  // namespace cps

@@ -19,30 +19,7 @@ CPS_HD CPS_INLINE void control_at(const Model& m, const Control& u, double t, Ve
 }
 
 // raise a flag from many threads: the largest code wins, whatever the order
-CPS_HD CPS_INLINE void raise_flag(int* p, int code) {
-#ifdef __CUDA_ARCH__
-  atomicMax(p, code);
-#else
-  int seen = __atomic_load_n(p, __ATOMIC_RELAXED);
-  while (seen < code && !__atomic_compare_exchange_n(p, &seen, code, true, __ATOMIC_RELAXED, __ATOMIC_RELAXED)) {
-  }
-#endif
-}
-
-// raise an instability reason: the first one raised stays (each stage raises one reason,
-// so the kept reason is that of the earliest stage that found a fault)
-CPS_HD CPS_INLINE void raise_first(int* p, int code) {
-#ifdef __CUDA_ARCH__
-  atomicCAS(p, 0, code);
-#else
-  int zero = 0;
-  __atomic_compare_exchange_n(p, &zero, code, false, __ATOMIC_RELAXED, __ATOMIC_RELAXED);
-#endif
-}
-
-// a scene whose run is over (end time reached) or unsound: its steps are no-ops that only
-// carry the arrays over
-CPS_HD CPS_INLINE bool halted(const Scene* g) { return g->clock.done != 0 || g->clock.bad != 0; }
+CPS_HD CPS_INLINE void raise_flag(int* p, int code) { atomic_max(p, code); }
 
 // A state holds n_scenes independent scenes of n_fluid particles each. Slots: the fluid of
 // scene s in [s n, (s + 1) n), its ghost slots in [N + s n, N + (s + 1) n) (N = all fluid);

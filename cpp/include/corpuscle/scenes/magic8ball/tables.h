@@ -18,14 +18,8 @@
   X(ghost_velocity, float, 3, "ghost", false, false, vel_[cur].data() + n, n_ghost)
 
 // X(name, C type, count, member of Scene, checkpointed)
-#define CPS_M8_SCALARS(X)                                       \
-  X(time, double, 1, clock.time, true)                          \
-  X(end_time, double, 1, clock.end_time, false)                 \
-  X(step, long long, 1, clock.step, true)                       \
-  X(dt, float, 1, clock.dt, true)                               \
-  X(done, int, 1, clock.done, false)                            \
-  X(bad, int, 1, clock.bad, false)                              \
-  X(bad_step, long long, 1, clock.bad_step, false)              \
+#define CPS_M8_SCALARS(X) \
+  CPS_CLOCK_SCALARS(X)                                      \
   X(die_position, float, 3, die.x, true)                        \
   X(die_velocity, float, 3, die.v, true)                        \
   X(die_orientation, float, 4, die.q, true)                     \

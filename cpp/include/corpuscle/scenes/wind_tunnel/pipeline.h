@@ -45,34 +45,7 @@ class Pipeline {
     return n * per + cells + sizeof(Model);
   }
 
-  static std::vector<FieldInfo> field_table() {
-    std::vector<FieldInfo> t;
-#define CPS_FIELD_INFO(name, T, comps, group, ckpt, settable, storage, count) \
-  t.push_back(FieldInfo{#name, group, dtype_of<T>(), comps, ckpt, settable});
-    CPS_WT_FIELDS(CPS_FIELD_INFO)
-#undef CPS_FIELD_INFO
-    return t;
-  }
-  static std::vector<ScalarInfo> scalar_table() {
-    std::vector<ScalarInfo> t;
-    Scene s{};
-    const char* base = reinterpret_cast<const char*>(&s);
-#define CPS_SCALAR_INFO(name, T, count, member, ckpt) \
-  t.push_back(ScalarInfo{#name, dtype_of<T>(), count, size_t(reinterpret_cast<const char*>(&s.member) - base), ckpt});
-    CPS_WT_SCALARS(CPS_SCALAR_INFO)
-#undef CPS_SCALAR_INFO
-    return t;
-  }
-  static std::vector<ScalarInfo> control_table() {
-    std::vector<ScalarInfo> t;
-    Control u{};
-    const char* base = reinterpret_cast<const char*>(&u);
-#define CPS_CONTROL_INFO(name, T, count, member) \
-  t.push_back(ScalarInfo{#name, dtype_of<T>(), count, size_t(reinterpret_cast<const char*>(&u.member) - base), false});
-    CPS_WT_CONTROLS(CPS_CONTROL_INFO)
-#undef CPS_CONTROL_INFO
-    return t;
-  }
+  CPS_KIND_TABLES(CPS_WT_FIELDS, CPS_WT_SCALARS, CPS_WT_CONTROLS, Scene, Control)
 
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u)
       : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)) {

@@ -6,9 +6,6 @@
 
 namespace cps::wt {
 
-CPS_HD CPS_INLINE bool halted(const Scene* g) { return g->clock.done != 0 || g->clock.bad != 0; }
-
-CPS_HD CPS_INLINE void raise_first(int* p, int code) { atomic_cas(p, 0, code); }
 
 CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
 #ifdef __CUDA_ARCH__
@@ -18,20 +15,6 @@ CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
 #endif
 }
 
-CPS_HD CPS_INLINE float fcos(float x) {
-#ifdef __CUDA_ARCH__
-  return ::cosf(x);
-#else
-  return std::cos(x);
-#endif
-}
-CPS_HD CPS_INLINE float fsin(float x) {
-#ifdef __CUDA_ARCH__
-  return ::sinf(x);
-#else
-  return std::sin(x);
-#endif
-}
 
 // counter-based random numbers: a pure function of (seed, particle id, step, stream), so
 // every backend and thread count draws the same ones (lowbias32, C. Wellons 2018)

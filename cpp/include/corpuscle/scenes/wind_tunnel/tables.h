@@ -14,14 +14,8 @@
   X(contacts, int, 1, "fluid", false, false, contacts_.data(), n)
 
 // X(name, C type, count, member of Scene, checkpointed)
-#define CPS_WT_SCALARS(X)                                         \
-  X(time, double, 1, clock.time, true)                            \
-  X(end_time, double, 1, clock.end_time, false)                   \
-  X(step, long long, 1, clock.step, true)                         \
-  X(dt, float, 1, clock.dt, true)                                 \
-  X(done, int, 1, clock.done, false)                              \
-  X(bad, int, 1, clock.bad, false)                                \
-  X(bad_step, long long, 1, clock.bad_step, false)                \
+#define CPS_WT_SCALARS(X) \
+  CPS_CLOCK_SCALARS(X)                                      \
   X(sums_vmax2, float, 1, sums.vmax2, true)                       \
   X(sums_ke, float, 1, sums.ke, true)                             \
   X(airfoil_force, float, 2, sums.force, true)                    \
