@@ -72,132 +72,6 @@ struct SingleLane {
 };
 
 #ifdef __CUDACC__
-// a full warp: lanes stride the neighbour candidates, sums reduce by butterfly shuffles
-// (the same tree on every run, so results are reproducible)
-struct WarpLanes {
-  __device__ int lane() const { return int(threadIdx.x) & 31; }
-  __device__ float sum(float x) const {
-    for (int o = 16; o > 0; o >>= 1) x += __shfl_xor_sync(0xffffffffu, x, o);
-    return x;
-  }
-  template <int D>
-  __device__ Vec<D> sum(Vec<D> v) const {
-    for (int k = 0; k < D; ++k) v[k] = sum(v[k]);
-    return v;
-  }
-  __device__ bool leader() const { return lane() == 0; }
-
-  // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
-  // (lane l: slots l and l + 32), then walk the cells with the ranges broadcast by shuffles,
-  // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
-  // serial loop's order (cell by cell, ascending index: a ballot keeps lane order), up to cap;
-  // returns how many there were (the same on every lane).
-  template <int D, class Visitor>
-  __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           int* list, int cap) const {
-    const int nslots = kStencil<D> * (ghosts ? 2 : 1);
-    const int l = lane();
-    int c[D];
-    g.spec.cell_of(xi, c);
-    uint32_t s0 = 0, e0 = 0, s1 = 0, e1 = 0;
-    load_range(g, c, l, nslots, s0, e0);
-    load_range(g, c, l + 32, nslots, s1, e1);
-    const unsigned below = (1u << l) - 1u;  // lanes before this one
-    int count = 0;
-    for (int k = 0; k < nslots; ++k) {
-      uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
-      uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
-      for (uint32_t base = s; base < e; base += 32u) {
-        const uint32_t j = base + uint32_t(l);
-        Vec<D> d = Vec<D>::zero();
-        float r2 = 0.0f;
-        bool hit = false;
-        if (j < e) {
-          d = xi - g.pos[j];
-          r2 = norm2(d);
-          hit = r2 < g.spec.h2;
-        }
-        const unsigned mask = __ballot_sync(0xffffffffu, hit);
-        if (hit) {
-          const int at = count + __popc(mask & below);
-          if (at < cap) list[at] = int(j);
-          visit(int(j), d, r2);
-        }
-        count += __popc(mask);
-      }
-    }
-    return count;
-  }
-
-  // the all-pairs walk, each lane every 32nd candidate; returns the count on every lane
-  template <int D, class Visitor>
-  __device__ int for_each_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
-                                   Visitor& visit) const {
-    int count = 0;
-    for (int base = begin; base < end; base += 32) {
-      const int j = base + lane();
-      bool hit = false;
-      if (j < end) {
-        Vec<D> d = xi - pos[j];
-        float r2 = norm2(d);
-        hit = r2 < r2max;
-        if (hit) visit(j, d, r2);
-      }
-      count += __popc(__ballot_sync(0xffffffffu, hit));
-    }
-    return count;
-  }
-
-  // visit the listed neighbours of xi, each lane every 32nd entry
-  template <int D, class Visitor>
-  __device__ void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
-                                  Visitor& visit) const {
-    for (int e = lane(); e < count; e += 32) {
-      const int j = list[e];
-      Vec<D> d = xi - pos[j];
-      visit(j, d, norm2(d));
-    }
-  }
-
-  // the same, copying the entries closer than sqrt(r2max) to `out` in list order (a ballot
-  // keeps lane order), up to cap; returns how many there were (the same on every lane)
-  template <int D, class Visitor>
-  __device__ int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
-                                            Visitor& visit, float r2max, int* out, int cap) const {
-    const int l = lane();
-    const unsigned below = (1u << l) - 1u;
-    int kept = 0;
-    for (int base = 0; base < count; base += 32) {
-      const int e = base + l;
-      bool near = false;
-      if (e < count) {
-        const int j = list[e];
-        Vec<D> d = xi - pos[j];
-        float r2 = norm2(d);
-        visit(j, d, r2);
-        near = r2 < r2max;
-      }
-      const unsigned mask = __ballot_sync(0xffffffffu, near);
-      if (near) {
-        const int at = kept + __popc(mask & below);
-        if (at < cap) out[at] = list[e];
-      }
-      kept += __popc(mask);
-    }
-    return kept;
-  }
-
- private:
-  // cell range of stencil slot k (layer k / stencil, offset k % stencil), empty outside the grid
-  template <int D>
-  __device__ static void load_range(const GridView<D>& g, const int* c, int k, int nslots, uint32_t& s, uint32_t& e) {
-    uint32_t slot;
-    if (k >= nslots || !stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) return;
-    s = g.cell_start[slot];
-    e = g.cell_end[slot];
-  }
-};
-
 // W cooperating lanes of a warp (W = 1, 2, 4, ..., 32) per item: a stage chooses its width
 // (warp-per-particle suits SPH's 100+ neighbours; DEM's ~6 contacts want a few lanes). Every
 // loop strides by W; sums reduce by shuffles within the group, ballots are masked to it, so
@@ -317,6 +191,63 @@ struct SubWarpLanes {
     return count;
   }
 };
+
+// a full warp: lanes stride the neighbour candidates, sums reduce by butterfly shuffles
+// (the same tree on every run, so results are reproducible)
+struct WarpLanes : SubWarpLanes<32> {
+  // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
+  // (lane l: slots l and l + 32), then walk the cells with the ranges broadcast by shuffles,
+  // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
+  // serial loop's order (cell by cell, ascending index: a ballot keeps lane order), up to cap;
+  // returns how many there were (the same on every lane).
+  template <int D, class Visitor>
+  __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
+                                           int* list, int cap) const {
+    const int nslots = kStencil<D> * (ghosts ? 2 : 1);
+    const int l = lane();
+    int c[D];
+    g.spec.cell_of(xi, c);
+    uint32_t s0 = 0, e0 = 0, s1 = 0, e1 = 0;
+    load_range(g, c, l, nslots, s0, e0);
+    load_range(g, c, l + 32, nslots, s1, e1);
+    const unsigned below = (1u << l) - 1u;  // lanes before this one
+    int count = 0;
+    for (int k = 0; k < nslots; ++k) {
+      uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
+      uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
+      for (uint32_t base = s; base < e; base += 32u) {
+        const uint32_t j = base + uint32_t(l);
+        Vec<D> d = Vec<D>::zero();
+        float r2 = 0.0f;
+        bool hit = false;
+        if (j < e) {
+          d = xi - g.pos[j];
+          r2 = norm2(d);
+          hit = r2 < g.spec.h2;
+        }
+        const unsigned mask = __ballot_sync(0xffffffffu, hit);
+        if (hit) {
+          const int at = count + __popc(mask & below);
+          if (at < cap) list[at] = int(j);
+          visit(int(j), d, r2);
+        }
+        count += __popc(mask);
+      }
+    }
+    return count;
+  }
+
+ private:
+  // cell range of stencil slot k (layer k / stencil, offset k % stencil), empty outside the grid
+  template <int D>
+  __device__ static void load_range(const GridView<D>& g, const int* c, int k, int nslots, uint32_t& s, uint32_t& e) {
+    uint32_t slot;
+    if (k >= nslots || !stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) return;
+    s = g.cell_start[slot];
+    e = g.cell_end[slot];
+  }
+};
+
 #endif
 
 }  // namespace cps
