@@ -176,8 +176,17 @@ class Pipeline {
     if (order_changed) sorted_ = false;
   }
 
-  // the step pipeline; parity_ selects the current buffers, the reorder writes the others
+  // the step pipeline; parity_ selects the current buffers, the reorder writes the others.
+  // A single run and a batch run the same stages, the single run's instantiated without
+  // the per-item scene arithmetic
   void enqueue(bool integrate) {
+    if (m_.n_scenes == 1) enqueue_as<false>(integrate);
+    else enqueue_as<true>(integrate);
+  }
+
+ private:
+  template <bool Many>
+  void enqueue_as(bool integrate) {
     const Model& m = m_;
     const int n = total_fluid(m), cap = 2 * n, B = m.n_scenes;
     const int cur = parity_, nxt = parity_ ^ 1;
@@ -188,40 +197,40 @@ class Pipeline {
     // 2. sort by key (when rebuilding), then reorder into the other buffers (ghosts built
     //    there, cell ranges) or carry the arrays over; a batch sorts every scene's segments
     //    at once, each scene that does not rebuild keeping its order
-    if (B == 1) {
+    if constexpr (!Many) {
       ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{g},
-                    ReorderStage{md, g, a});
+                    ReorderStage<Many>{md, g, a});
     } else {
       ex_.for_each(cap, SelectKeysStage{md, g, a});
       int seg_bits = 1;
       while ((1 << seg_bits) < 2 * B) ++seg_bits;
       ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + seg_bits);
-      ex_.for_each(cap, ReorderStage{md, g, a});
+      ex_.for_each(cap, ReorderStage<Many>{md, g, a});
     }
     ex_.mark(0);
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
     GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
     // 3. density and pressure (and the neighbour lists); the container frame of this step
-    ex_.for_each_lanes(n, DensityStage<Index>{md, g, u_, s, grid});
+    ex_.for_each_lanes(n, DensityStage<Index, Many>{md, g, u_, s, grid});
     ex_.mark(1);
     // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
-      if (B == 1) {
-        ex_.for_each_lanes_reduce_then(n, ForceStage<Index>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
+      if constexpr (!Many) {
+        ex_.for_each_lanes_reduce_then(n, ForceStage<Index, Many>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
                                        StepSums::identity(), FinalizeStage{md, g});
       } else {
-        ex_.for_each_lanes(n, ForceStage<Index>{md, g, s, grid});
+        ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
         ex_.for_each(B, SceneReduceStage{md, s.items, scene_sums_.data()});
         ex_.for_each(B, FinalizeStage{md, g, scene_sums_.data()});
       }
       ex_.mark(2);
       // 5. integrate, then key the next step
-      ex_.for_each(keys_items(m), IntegrateStage{md, g, s});
+      ex_.for_each(keys_items(m), IntegrateStage<Many>{md, g, s});
       ex_.mark(3);
     } else {
-      ex_.for_each_lanes(n, ForceStage<Index>{md, g, s, grid});
-      if (B == 1) {
+      ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+      if constexpr (!Many) {
         ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
       } else {
         ex_.for_each(B, SceneReduceStage{md, s.items, scene_sums_.data()});
@@ -231,6 +240,7 @@ class Pipeline {
     }
   }
 
+ public:
   // the current storage of a field (before the first step: input order, current buffers)
   std::pair<void*, long long> view(const std::string& name, const Scene& rec) {
     const int n = total_fluid(m_);

@@ -26,17 +26,31 @@ CPS_HD CPS_INLINE void raise_flag(int* p, int code) { atomic_max(p, code); }
 // its cell table at s * cells_per_scene. A single run is a batch of one (the same layout as
 // ever: fluid in [0, n), ghosts after it).
 CPS_HD CPS_INLINE int total_fluid(const Model& m) { return m.n_fluid * m.n_scenes; }
-CPS_HD CPS_INLINE int scene_of_slot(const Model& m, int j) {
-  const int N = total_fluid(m);
-  return (j < N ? j : j - N) / m.n_fluid;
-}
 CPS_HD CPS_INLINE size_t cells_per_scene(const Model& m) { return 2 * size_t(m.grid.ncells); }
-// the grid of scene s: its own cell table
-CPS_HD CPS_INLINE GridView<D> scene_grid(const Model& m, GridView<D> g, int s) {
-  g.cell_start += size_t(s) * cells_per_scene(m);
-  g.cell_end += size_t(s) * cells_per_scene(m);
-  return g;
-}
+// The per-item scene arithmetic of the stages that run every step, for a single run
+// (Many = false: every scene index is 0 at compile time, as before batches existed; a
+// division per item costs the default scene about 1%) or a batch (Many = true).
+template <bool Many>
+struct Scenes {
+  // all fluid particles of the state
+  CPS_HD static int fluid(const Model& m) { return Many ? total_fluid(m) : m.n_fluid; }
+  // the scene of fluid particle i, and whether it is its scene's first
+  CPS_HD static int of(const Model& m, int i) { return Many ? i / m.n_fluid : 0; }
+  CPS_HD static bool first(const Model& m, int i) { return Many ? i % m.n_fluid == 0 : i == 0; }
+  // the scene of slot j (fluid or ghost)
+  CPS_HD static int of_slot(const Model& m, int j) {
+    const int N = fluid(m);
+    return of(m, j < N ? j : j - N);
+  }
+  // the grid of scene s: its own cell table
+  CPS_HD static GridView<D> grid(const Model& m, GridView<D> g, int s) {
+    if constexpr (Many) {
+      g.cell_start += size_t(s) * cells_per_scene(m);
+      g.cell_end += size_t(s) * cells_per_scene(m);
+    }
+    return g;
+  }
+};
 
 // cell keys of fluid particle i at x and of its ghost slot N + i, with identity values
 CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x) {
@@ -88,8 +102,8 @@ struct KeysStage {
     const bool fluid = i < total_fluid(m);
     Vec3 x = fluid ? a.pos[i] : Vec3::zero();
     start_step(m, a, i, &x);
-    if (fluid && i % m.n_fluid == 0) {
-      Scene* gs = g + i / m.n_fluid;
+    if (fluid && Scenes<true>::first(m, i)) {
+      Scene* gs = g + Scenes<true>::of(m, i);
       gs->rebuild[gs->clock.step & 1] = 1;  // a new state is always sorted and listed
     }
   }
@@ -113,7 +127,7 @@ struct SelectKeysStage {
   Arrays a;
   CPS_HD void operator()(int j) const {
     const Model& m = *model;
-    const int N = total_fluid(m), s = scene_of_slot(m, j);
+    const int N = total_fluid(m), s = Scenes<true>::of_slot(m, j);
     const Scene* gs = g + s;
     const int layer = j < N ? 0 : 1;
     const int begin = layer * N + s * m.n_fluid;
@@ -122,20 +136,24 @@ struct SelectKeysStage {
   }
 };
 
-// the sorted cell key of slot j (the low half of a batch's 64-bit key)
-CPS_HD CPS_INLINE uint32_t sorted_key(const Model& m, const Arrays& a, int j) {
-  return m.n_scenes > 1 ? uint32_t(a.keys64_sorted[j]) : a.keys_sorted[j];
+// the sorted cell key of slot j (a batch's: the low half of its 64-bit key)
+template <bool Many>
+CPS_HD CPS_INLINE uint32_t sorted_key(const Arrays& a, int j) {
+  if constexpr (Many) return uint32_t(a.keys64_sorted[j]);
+  else return a.keys_sorted[j];
 }
 
 // stage 2: gather particle arrays into sorted order, build ghosts, record cell ranges; when
 // not rebuilding, carry the arrays over in their order (ghosts were moved by the integration)
+template <bool Many>
 struct ReorderStage {
   const Model* model;
   Scene* g;
   Arrays a;
   CPS_HD void operator()(int j) const {
     const Model& m = *model;
-    const int n = m.n_fluid, N = total_fluid(m), s = scene_of_slot(m, j);
+    using S = Scenes<Many>;
+    const int n = m.n_fluid, N = S::fluid(m), s = S::of_slot(m, j);
     Scene* gs = g + s;
     const bool fluid = j < N;
     const int begin = (fluid ? 0 : N) + s * n, end = begin + n;  // this slot's segment
@@ -148,13 +166,13 @@ struct ReorderStage {
       return;
     }
     const uint32_t sentinel = m.grid.sentinel();
-    const uint32_t k = sorted_key(m, a, j);
-    const bool last = j + 1 == end || sorted_key(m, a, j + 1) != k;
+    const uint32_t k = sorted_key<Many>(a, j);
+    const bool last = j + 1 == end || sorted_key<Many>(a, j + 1) != k;
     if (k < sentinel) {
       // the cell's range in the scene's table (layer 1: the ghost half)
       const size_t slot = size_t(s) * cells_per_scene(m) + (k & (m.grid.layer_bit() - 1u)) +
                           ((k & m.grid.layer_bit()) ? m.grid.ncells : 0u);
-      if (j == begin || sorted_key(m, a, j - 1) != k) a.cell_start[slot] = uint32_t(j);
+      if (j == begin || sorted_key<Many>(a, j - 1) != k) a.cell_start[slot] = uint32_t(j);
       if (last) a.cell_end[slot] = uint32_t(j + 1);
     }
     if (k >= sentinel) {
@@ -175,7 +193,7 @@ struct ReorderStage {
       a.id_alt[j] = -1;
       a.ghost_of[f] = j;
     }
-    if (!fluid && (j + 1 == end || sorted_key(m, a, j + 1) >= sentinel)) gs->n_ghost = j + 1 - begin;
+    if (!fluid && (j + 1 == end || sorted_key<Many>(a, j + 1) >= sentinel)) gs->n_ghost = j + 1 - begin;
   }
 };
 
@@ -200,7 +218,7 @@ struct AllPairsIndex {
 };
 
 // the two pair stages for each index: the density (and, for lists, the listing) and the forces
-template <class Index>
+template <class Index, bool Many>
 struct PairWalk {
   // visit the density neighbours of i (within the list radius for lists, else h); returns
   // (count within the list radius, count within h) as lists need them
@@ -225,7 +243,7 @@ struct PairWalk {
   template <class Lanes, class V>
   CPS_HD static int all_pairs(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
                               const Lanes& L, V& v) {
-    const int n = m.n_fluid, s = i / n, ghosts = total_fluid(m) + s * n;
+    const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
     return L.for_each_in_range(grid.pos, s * n, s * n + n, x, m.kern.h2, v) +
            L.for_each_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, m.kern.h2, v);
   }
@@ -251,7 +269,7 @@ struct PairWalk {
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
-template <class Index>
+template <class Index, bool Many>
 struct DensityStage {
   const Model* model;
   Scene* g;
@@ -261,17 +279,18 @@ struct DensityStage {
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
-    const int s = i / m.n_fluid;
+    using S = Scenes<Many>;
+    const int s = S::of(m, i);
     Scene* gs = g + s;
     if (halted(gs)) return;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
     const bool rebuild = rebuilding(gs);
     int count = 0, kept = 0;
-    PairWalk<Index>::density(m, gs, a, scene_grid(m, grid, s), i, x, L, v, count, kept);
+    PairWalk<Index, Many>::density(m, gs, a, S::grid(m, grid, s), i, x, L, v, count, kept);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
-    if (i % m.n_fluid == 0) prepare_frame(m, ctl[s], *gs);  // read by the force stage and the finalize
+    if (S::first(m, i)) prepare_frame(m, ctl[s], *gs);  // read by the force stage and the finalize
     if constexpr (Index::lists) {
       a.near_count[i] = kept;
       if (count > m.max_neighbors || kept > m.max_near) raise_first(&gs->clock.bad, kBadNeighbors);
@@ -295,7 +314,7 @@ struct DensityStage {
 // stage 4: SPH forces (over the neighbours the density stage listed), XSPH, container-frame
 // terms and die coupling of fluid particles; the per-particle contributions to this step's
 // reductions
-template <class Index>
+template <class Index, bool Many>
 struct ForceStage {
   const Model* model;
   const Scene* g;
@@ -304,12 +323,13 @@ struct ForceStage {
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
-    const int sc = i / m.n_fluid;
+    using S = Scenes<Many>;
+    const int sc = S::of(m, i);
     const Scene* gs = g + sc;
     if (halted(gs)) return;  // the reduction of a step not taken is discarded
-    ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, total_fluid(m));
+    ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, S::fluid(m));
     Vec3 x = a.pos[i];
-    PairWalk<Index>::forces(m, gs, a, scene_grid(m, grid, sc), i, x, L, fv);
+    PairWalk<Index, Many>::forces(m, gs, a, S::grid(m, grid, sc), i, x, L, fv);
     fv.reduce(L);
     if (!L.leader()) return;
     Vec3 v = a.vel[i];
@@ -441,6 +461,7 @@ struct FinalizeStage {
 
 // stage 6: integrate fluid (symplectic Euler, XSPH-corrected drift), enforce the wall, and
 // start the next step (its keys, cleared cell table and frame) in the same pass
+template <bool Many>
 struct IntegrateStage {
   const Model* model;
   Scene* g;
@@ -448,8 +469,8 @@ struct IntegrateStage {
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
     Vec3 x = Vec3::zero();
-    const bool fluid = i < total_fluid(m);
-    Scene* gs = g + (fluid ? i / m.n_fluid : 0);
+    const bool fluid = i < Scenes<Many>::fluid(m);
+    Scene* gs = g + (fluid ? Scenes<Many>::of(m, i) : 0);
     // a step that was not taken (halted before integrating) leaves the particles as they are
     const bool taken = gs->step_dt > 0.0f;
     if (fluid && !taken) x = a.pos[i];
