@@ -594,3 +594,25 @@ def test_cuda_field_view_round_trips_through_dlpack():
         got = cupy.asnumpy(cupy.from_dlpack(sim.field("position")))
     assert got.shape == expected.shape and got.dtype == np.float32
     np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("backend", ["serial", "cpu", pytest.param("cuda", marks=[pytest.mark.gpu, requires_cuda])])
+def test_download_many_is_each_download(backend):
+    # a frame's fields in one transfer (through pinned memory on CUDA): each array is what
+    # download(name) returns, bit for bit, including the ghost fields whose count changes
+    # from step to step, an empty list and a repeated name; an unknown name is an error
+    sim = make(backend, particles=400)
+    sim.step(3)
+    names = ["position", "velocity", "density", "pressure", "id", "ghost_position", "position"]
+    got = sim.core.download_many(names)
+    assert set(got) == set(names)
+    for name in names:
+        want = sim.core.download(name)
+        assert got[name].dtype == want.dtype and got[name].shape == want.shape
+        assert got[name].tobytes() == want.tobytes()
+    assert dict(sim.core.download_many([])) == {}
+    with pytest.raises(KeyError, match="nope"):
+        sim.core.download_many(["position", "nope"])
+    # a frame is made from it: the same arrays as the per-field copies
+    frame = sim.frame(velocity=True)
+    assert frame["fields"]["position"].tobytes() == sim.core.download("position").tobytes()

@@ -356,6 +356,28 @@ void bind_sim(nb::module_& m) {
              if (count > 0) s.sim->download(name, bytes.data());
              return owned(std::move(bytes), f, count);
            }, nb::arg("name"), "A host (NumPy) copy of a field.")
+      .def("download_many", [](PySim& s, const std::vector<std::string>& names) {
+             std::vector<std::vector<unsigned char>> bytes(names.size());
+             std::vector<void*> dst(names.size());
+             std::vector<long long> counts(names.size());
+             for (size_t k = 0; k < names.size(); ++k) {
+               const FieldInfo& f = field_info(*s.sim, names[k]);
+               counts[k] = s.sim->view(names[k]).second;
+               bytes[k].resize(std::max<size_t>(1, size_t(counts[k]) * size_t(f.components) * dtype_size(f.dtype)));
+               dst[k] = bytes[k].data();
+             }
+             {
+               nb::gil_scoped_release release;
+               s.sim->download_many(names, dst);
+             }
+             nb::dict d;
+             for (size_t k = 0; k < names.size(); ++k) {
+               const FieldInfo& f = field_info(*s.sim, names[k]);
+               bytes[k].resize(size_t(counts[k]) * size_t(f.components) * dtype_size(f.dtype));
+               d[names[k].c_str()] = owned(std::move(bytes[k]), f, counts[k]);
+             }
+             return d;
+           }, nb::arg("names"), "Host (NumPy) copies of several fields, in one transfer (a frame).")
       .def("view", [](nb::handle self, const std::string& name) {
              PySim& s = nb::cast<PySim&>(self);
              const FieldInfo& f = field_info(*s.sim, name);

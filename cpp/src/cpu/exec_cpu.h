@@ -20,6 +20,7 @@
 #include <parallel/algorithm>
 #endif
 
+#include "corpuscle/core/copies.h"
 #include "corpuscle/core/lanes.h"
 
 namespace cps {
@@ -288,6 +289,10 @@ struct CpuExec {
 
   void zero(void* p, size_t bytes) const { std::memset(p, 0, bytes); }
   void to_host(void* dst, const void* src, size_t bytes) const { std::memcpy(dst, src, bytes); }
+  void to_host_many(const std::vector<HostCopy>& copies) const {
+    for (const HostCopy& c : copies)
+      if (c.bytes) std::memcpy(c.dst, c.src, c.bytes);
+  }
   void to_device(void* dst, const void* src, size_t bytes) const { std::memcpy(dst, src, bytes); }
   void synchronize() const {}
   // a small upload ordered before the next launch (the CPU's is immediate)

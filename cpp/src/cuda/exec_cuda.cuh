@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/core/copies.h"
 #include "corpuscle/core/lanes.h"
 
 namespace cps {
@@ -243,7 +244,8 @@ struct CudaExec {
         temp_(std::exchange(o.temp_, nullptr)), temp_bytes_(std::exchange(o.temp_bytes_, 0)),
         counter_(std::exchange(o.counter_, nullptr)), poll_bytes_(std::exchange(o.poll_bytes_, 0)),
         stage_host_(std::exchange(o.stage_host_, nullptr)), stage_event_(std::exchange(o.stage_event_, nullptr)),
-        stage_bytes_(std::exchange(o.stage_bytes_, 0)) {
+        stage_bytes_(std::exchange(o.stage_bytes_, 0)), frame_host_(std::exchange(o.frame_host_, nullptr)),
+        frame_bytes_(std::exchange(o.frame_bytes_, 0)) {
     for (int p = 0; p < 2; ++p) {
       graph_[p] = std::exchange(o.graph_[p], nullptr);
       eager_[p] = o.eager_[p];
@@ -265,6 +267,7 @@ struct CudaExec {
     }
     if (stage_host_) cudaFreeHost(stage_host_);
     if (stage_event_) cudaEventDestroy(stage_event_);
+    if (frame_host_) cudaFreeHost(frame_host_);
     if (stream_) cudaStreamDestroy(stream_);
   }
 
@@ -490,6 +493,33 @@ struct CudaExec {
     CPS_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToHost, stream_));
     CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
   }
+  // several device ranges to host memory (a frame's fields): every copy enqueued into one
+  // pinned buffer, one wait for all of them, then out to the destinations
+  void to_host_many(const std::vector<HostCopy>& copies) {
+    activate();
+    size_t total = 0;
+    for (const HostCopy& c : copies) total += (c.bytes + 255) / 256 * 256;
+    if (total > frame_bytes_) {
+      synchronize();
+      if (frame_host_) CPS_CUDA_CHECK(cudaFreeHost(frame_host_));
+      frame_host_ = nullptr;
+      frame_bytes_ = 0;
+      CPS_CUDA_CHECK(cudaMallocHost(&frame_host_, total));
+      frame_bytes_ = total;
+    }
+    size_t at = 0;
+    for (const HostCopy& c : copies) {
+      if (c.bytes) CPS_CUDA_CHECK(cudaMemcpyAsync(static_cast<char*>(frame_host_) + at, c.src, c.bytes,
+                                                  cudaMemcpyDeviceToHost, stream_));
+      at += (c.bytes + 255) / 256 * 256;
+    }
+    CPS_CUDA_CHECK(cudaStreamSynchronize(stream_));
+    at = 0;
+    for (const HostCopy& c : copies) {
+      if (c.bytes) std::memcpy(c.dst, static_cast<const char*>(frame_host_) + at, c.bytes);
+      at += (c.bytes + 255) / 256 * 256;
+    }
+  }
   void to_device(void* dst, const void* src, size_t bytes) {
     activate();
     CPS_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyHostToDevice, stream_));
@@ -659,6 +689,8 @@ struct CudaExec {
   void* stage_host_ = nullptr;
   cudaEvent_t stage_event_ = nullptr;
   size_t stage_bytes_ = 0;
+  void* frame_host_ = nullptr;  // to_host_many's pinned buffer
+  size_t frame_bytes_ = 0;
   cudaGraphExec_t graph_[2] = {nullptr, nullptr};
   int eager_[2] = {0, 0};
   bool graphs_ = true;

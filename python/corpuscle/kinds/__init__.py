@@ -193,7 +193,7 @@ class Kind:
             names.append("velocity")
         if ghosts:
             names += list(self.ghost_fields)
-        fields = {name: sim.core.download(name) for name in names}
+        fields = dict(sim.core.download_many(names))  # one transfer for the frame
         groups = {name: group.get(name, "fluid") for name in names}
         rigid = {name: {"position": p["position"], "orientation": p["orientation"]}
                  for name, p in sim.rigid_poses().items()}

@@ -64,6 +64,8 @@ class Sim {
   // current storage of a field (host or device) and its item count / a host copy
   virtual std::pair<void*, long long> view(const std::string& name) = 0;
   virtual void download(const std::string& name, void* dst) = 0;
+  // host copies of several fields at once (a frame): one wait on a device
+  virtual void download_many(const std::vector<std::string>& names, const std::vector<void*>& dst) = 0;
   // replace a field's values (the kind decides which fields may be set and what follows)
   virtual void upload(const std::string& name, const void* src, long long count) = 0;
 

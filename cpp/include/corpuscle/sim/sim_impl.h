@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "corpuscle/core/copies.h"
 #include "corpuscle/core/error.h"
 #include "corpuscle/sim/registry.h"
 #include "corpuscle/sim/sim.h"
@@ -179,6 +180,16 @@ class SimImpl final : public Sim {
     auto [ptr, count] = p_.view(name, records()[0]);
     ex_.synchronize();
     if (count > 0) ex_.to_host(dst, ptr, size_t(count) * size_t(f.components) * dtype_size(f.dtype));
+  }
+  void download_many(const std::vector<std::string>& names, const std::vector<void*>& dst) override {
+    if (names.size() != dst.size()) throw Error("download_many: one destination per field");
+    std::vector<HostCopy> copies;
+    for (size_t k = 0; k < names.size(); ++k) {
+      const FieldInfo& f = find(fields_, names[k], "field");
+      auto [ptr, count] = p_.view(names[k], records()[0]);
+      copies.push_back({dst[k], ptr, size_t(count) * size_t(f.components) * dtype_size(f.dtype)});
+    }
+    ex_.to_host_many(copies);
   }
   void upload(const std::string& name, const void* src, long long count) override {
     const FieldInfo& f = find(fields_, name, "field");
