@@ -2,7 +2,8 @@
 
 Builds the default scene several times and times, on the same GPU: one step() call for the
 whole run, step() in the CLI's chunks without frames, with the frames downloaded, and with
-them written by the frame sink, against `bench`. Prints one JSON line per variant.
+them written by the frame sink (with the interpreter's default 5 ms switch interval, and
+with 0.5 ms as the CLI sets), against `bench`. Prints one JSON line per variant.
 
 Usage: python3 benchmarks/cli_overhead.py [--backend cuda] [--every 100] [--repeats 3]
 """
@@ -10,6 +11,7 @@ import argparse
 import json
 import os
 import statistics
+import sys
 import tempfile
 import time
 
@@ -33,10 +35,11 @@ def fresh():
 
 
 def run(variant):
+    sys.setswitchinterval(0.0005 if variant == "sink-switch" else 0.005)
     sim = fresh()
     host = {"step": 0.0, "frame": 0.0, "put": 0.0}
     d = tempfile.mkdtemp()
-    writer = io.FrameWriter(os.path.join(d, "o.cps"), sim.header()) if variant == "sink" else None
+    writer = io.FrameWriter(os.path.join(d, "o.cps"), sim.header()) if variant.startswith("sink") else None
     sink = FrameSink(writer) if writer else None
     t0 = time.perf_counter()
     if variant == "one-call":
@@ -51,7 +54,7 @@ def run(variant):
             host["step"] += b - a
             if taken == 0 or sim.check_health():
                 break
-            if variant in ("frames", "sink"):
+            if variant in ("frames", "sink", "sink-switch"):
                 rec = sim.frame()
                 c = time.perf_counter()
                 host["frame"] += c - b
@@ -68,7 +71,7 @@ def run(variant):
 
 
 out = {}
-for variant in ("one-call", "chunks", "frames", "sink"):
+for variant in ("one-call", "chunks", "frames", "sink", "sink-switch"):
     rows = [run(variant) for _ in range(args.repeats)]
     steps = rows[0][0]
     walls = [r[1] for r in rows]

@@ -720,6 +720,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return "frame"
         return "checkpoint" if final or step % ckpt == 0 else "frame"
 
+    # the frame writer's thread shares the interpreter with this loop: a short switch
+    # interval hands the loop the interpreter back soon after a chunk of steps returns (the
+    # default 5 ms would leave the device idle that long behind a frame being encoded)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(min(switch, 0.0005))
     t0 = time.perf_counter()
     try:
         with writer:
@@ -781,6 +786,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except OSError as exc:
         # the writer cut the file back to its last whole frame
         write_error = f"cannot write {out}: {exc.strerror or _one_line(exc)}"
+    finally:
+        sys.setswitchinterval(switch)
     # the writer is closed here, so every recorded frame is readable
 
     steps = int(sim.steps) - start_steps
