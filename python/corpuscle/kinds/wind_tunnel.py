@@ -368,7 +368,9 @@ class WindTunnel(Kind):
         plus the pitch), from the next step on, with no rebuild."""
         values = {}
         for name, value in (("speed_scale", speed_scale), ("pitch", pitch)):
-            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            if isinstance(value, (list, tuple, np.ndarray)) and np.shape(value) == (1,):
+                value = value[0]  # as the core lists it: one number
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
                 raise TypeError(f"{name} must be a number, got {value!r}")
             values[name] = float(value)
         x, p = values["speed_scale"], values["pitch"]
