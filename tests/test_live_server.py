@@ -389,3 +389,39 @@ def test_view_serves_a_recorded_run_and_seeks(tmp_path):
     text = "".join(proc.lines)
     assert rc == 0, text
     assert "viewing" in text and "4 frames" in text and "cannot be steered" in text
+
+
+def test_run_live_wind_tunnel_sliders_and_frames_between_recorded_ones(tmp_path):
+    out = tmp_path / "wt.cps"
+    # a frame is recorded every 100000 steps: the page still sees the run move, and its
+    # control is taken within a frame, not at the next recorded one
+    proc = _Proc("run", "wind-tunnel", "--backend", "serial", "--particles", "500", "--steps", "100000000",
+                 "--every", "100000", "--live", "--port", "0", "--out", str(out), "--no-progress")
+    try:
+        async def go():
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(f"ws://127.0.0.1:{proc.port}/ws") as ws:
+                hello = json.loads((await ws.receive(timeout=30)).data)
+                assert hello["controls"] == {"speed_scale": 1, "pitch": 1}
+                assert hello["control"] == {"speed_scale": [0.0], "pitch": [0.0]}
+                assert [s["control"] for s in hello["sliders"]] == ["speed_scale", "pitch"]
+                ob = hello["scene"]["obstacles"][0]
+                assert ob["type"] == "polygon" and ob["turn"]["diagnostic"] == "pitch" and len(ob["points"]) > 10
+                a = await receive_frame(ws, 30)
+                b = await receive_frame(ws, 30)
+                assert 0 < b["step"] - a["step"] < 100000 and b["step"] < 100000
+                await ws.send_str('{"type": "control", "pitch": [4.5]}')
+                await ws.send_str('{"type": "control", "pitch": [60]}')  # outside the slider's range: rejected
+                t = time.time()
+                while time.time() - t < 30:
+                    f = await receive_frame(ws, 30)
+                    if f["meta"]["diagnostics"].get("pitch") == 4.5:
+                        break
+                assert f["meta"]["control"] == {"speed_scale": [0.0], "pitch": [4.5]} and f["step"] < 100000
+                assert f["meta"]["diagnostics"]["lift"] is not None and "cl" in f["meta"]["result"]
+
+        asyncio.run(go())
+    finally:
+        rc = proc.interrupt()
+    text = "".join(proc.lines)
+    assert rc == 130, text
+    assert "rejected message from 127.0.0.1: control 'pitch'[0] = 60 is outside" in text and "Traceback" not in text

@@ -32,7 +32,7 @@
     out float vCol;
     void main(){ vec3 p = uLo + aPos*uSpan; if (uDim == 2) p.z = 0.0;
       vec4 v = uView*vec4(p, 1.0); gl_Position = uProj*v;
-      gl_PointSize = clamp(uRadius*uScale/mix(1.0, max(-v.z, 1e-4), uPersp), 1.5, 64.0); vCol = aCol; }`;
+      gl_PointSize = clamp(2.0*uRadius*uScale/mix(1.0, max(-v.z, 1e-4), uPersp), 1.5, 256.0); vCol = aCol; }`;
   const PFS = `#version 300 es
     precision highp float; in float vCol; uniform int uHasCol; out vec4 color; ${RAMP}
     void main(){ vec2 c = gl_PointCoord*2.0-1.0; float r2 = dot(c,c); if (r2 > 1.0) discard;
@@ -284,6 +284,9 @@
     return [(x + 1) / 2 * canvas.clientWidth, (1 - y) / 2 * canvas.clientHeight];
   };
 
+  // the outline of obstacle k as last drawn (segment end points, x y z each)
+  S.obstacleOutline = (k) => Array.from((S.obstacles[k] || {}).drawn || []);
+
   // ---- drawing -----------------------------------------------------------------------------
   let staticLines = new Float32Array(0), nPoints = 0, hasColor = false, dirty = true, newFrame = false;
   function drawLines(data, mode, color, size, round) {
@@ -320,7 +323,8 @@
     if (S.dim === 2) gl.disable(gl.DEPTH_TEST);
     for (const o of S.obstacles || []) {
       if (o.fill.length) drawLines(turned(o, o.fill), gl.TRIANGLES, [0.78, 0.80, 0.84, 1]);
-      drawLines(turned(o, o.lines), gl.LINES, [0.95, 0.96, 1.0, 1]);
+      o.drawn = turned(o, o.lines);
+      drawLines(o.drawn, gl.LINES, [0.95, 0.96, 1.0, 1]);
       nob++;
     }
     S.obstaclesDrawn = nob;
@@ -347,7 +351,7 @@
     }
     S.bodiesDrawn = nb;
     gl.enable(gl.DEPTH_TEST);
-    if (newFrame) { S.drawn++; drawTimes.push(performance.now()); newFrame = false; }
+    if (newFrame) { S.drawn++; S.drawnIndex = f ? f.index : -1; drawTimes.push(performance.now()); newFrame = false; }
   }
   const drawTimes = [], recvTimes = [];
   function rate(times) {  // events per second over the last second
@@ -356,7 +360,10 @@
     if (times.length < 2) return times.length;
     return (times.length - 1) / Math.max(1e-3, (times[times.length - 1] - times[0]) / 1000);
   }
-  function frameLoop() { if (dirty) draw(); requestAnimationFrame(frameLoop); }
+  // S.redraw (benchmarks/live_draw_rate.py): draw every animation frame, counted in S.redraws,
+  // to time the drawing apart from the transfer
+  S.redraws = 0;
+  function frameLoop() { if (dirty || S.redraw) { draw(); S.redraws++; } requestAnimationFrame(frameLoop); }
   setInterval(() => {
     S.drawRate = rate(drawTimes); S.receiveRate = rate(recvTimes);
     $('draw-rate').textContent = S.drawRate ? S.drawRate.toFixed(1) : '–';
@@ -432,6 +439,7 @@
   function fmt(x, d) { return x === null || x === undefined || !isFinite(x) ? '–' : (+x).toFixed(d); }
   function num(x) {
     if (x === null || x === undefined || !isFinite(x)) return '–';
+    if (Number.isInteger(x) && Math.abs(x) < 1e9) return x.toLocaleString('en');
     const a = Math.abs(x); return a !== 0 && (a < 1e-3 || a >= 1e5) ? (+x).toExponential(3) : (+x).toPrecision(4);
   }
   function unit(name) { const u = (S.header.units || {})[name]; return u && u !== 'count' ? ` ${u}` : ''; }
