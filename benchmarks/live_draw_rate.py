@@ -3,8 +3,11 @@ thread publishes fresh synthetic frames (no simulation) as fast as the server ta
 server quantises and sends the latest, headless Chromium (Playwright) receives, uploads and
 draws them; the page's own counters (performance.now()) give the rates.
 
-Two figures per size: "end to end" (frames received and drawn per second while the producer
-runs) and "draw only" (the page redraws its last frame on every animation frame, no transfer).
+Three figures per size: "end to end" (frames received and drawn per second while the producer
+runs; the page acknowledges each frame it draws and the server sends at most two ahead),
+"transfer only" (the same with the particles' draw call skipped: sending, receiving, decoding
+and uploading) and "draw only" (the page redraws its last frame on every animation frame, no
+transfer).
 The WebGL renderer is printed: in headless Chromium without a GPU it is SwiftShader, a CPU
 software rasteriser, so the figures are CPU figures (they share this machine's cores with the
 server and the producer).
@@ -72,6 +75,10 @@ def measure(page, n: int, dim: int, seconds: float) -> dict:
         t.start()
         page.wait_for_timeout(2000)  # warm-up
         e2e = page.evaluate(MEASURE, seconds)
+        page.evaluate("window.corpuscleViewer.skipParticles = true")
+        page.wait_for_timeout(1000)
+        transfer = page.evaluate(MEASURE, seconds)
+        page.evaluate("window.corpuscleViewer.skipParticles = false")
         stop.set()
         t.join()
         page.evaluate("window.corpuscleViewer.redraw = true")
@@ -85,6 +92,7 @@ def measure(page, n: int, dim: int, seconds: float) -> dict:
             t.join()
         s.stop()
     return {"particles": n, "dim": dim, "received": e2e["received"], "drawn": e2e["drawn"],
+            "transfer": transfer["received"],
             "draw_only": only["redraws"], "renderer": renderer, "published": s.published}
 
 
@@ -98,17 +106,22 @@ def main() -> None:
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--chromium", default=os.environ.get("CORPUSCLE_CHROMIUM") or shutil.which("chromium"))
     ap.add_argument("--gpu", action="store_true", help="no SwiftShader flags: Chromium picks its GL")
+    ap.add_argument("--radius", type=float, default=None, help="particle radius (m; default 0.0015, the 8-ball's scale)")
     args = ap.parse_args()
     w, h = (int(x) for x in args.size.split("x"))
+    if args.radius is not None:
+        for hd in HEADERS.values():
+            hd["particle_radius"] = args.radius
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=args.chromium, args=[] if args.gpu else SWIFTSHADER)
-        page = browser.new_page(viewport={"width": w, "height": h})
+        page = browser.new_context(viewport={"width": w, "height": h}, bypass_csp=True).new_page()  # wait_for_function evaluates
         try:
             for n in args.n:
                 r = measure(page, n, args.dim, args.seconds)
                 print(f"{r['particles']:>10,} particles ({r['dim']}-D, {w}x{h}): end to end {r['received']:6.1f} frames/s "
-                      f"received, {r['drawn']:6.1f} drawn; draw only {r['draw_only']:6.1f} frames/s", flush=True)
+                      f"received, {r['drawn']:6.1f} drawn; transfer only {r['transfer']:6.1f}; draw only {r['draw_only']:6.1f} "
+                      "frames/s", flush=True)
         finally:
             browser.close()
     print(f"renderer: {r['renderer']}; load average {load:.2f} on {os.cpu_count()} CPUs")

@@ -425,3 +425,34 @@ def test_run_live_wind_tunnel_sliders_and_frames_between_recorded_ones(tmp_path)
     text = "".join(proc.lines)
     assert rc == 130, text
     assert "rejected message from 127.0.0.1: control 'pitch'[0] = 60 is outside" in text and "Traceback" not in text
+
+
+def test_a_page_that_acknowledges_frames_is_sent_at_most_two_ahead():
+    s = server()
+    try:
+        s.publish(frame(0))
+
+        async def go():
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(ws_url(s)) as ws:
+                await ws.receive(timeout=10)
+                assert (await receive_frame(ws))["index"] == 0
+                await ws.send_str('{"type": "ready"}')  # drew frame 0: flow control from here on
+                got = []
+                for i in range(1, 6):
+                    s.publish(frame(i))
+                    await asyncio.sleep(0.15)
+                while True:
+                    try:
+                        got.append(await receive_frame(ws, timeout=0.5))
+                    except asyncio.TimeoutError:
+                        break
+                assert [g["index"] for g in got] == [1, 2]  # two credits: no more until the page draws one
+                await ws.send_str('{"type": "ready"}')
+                last = await receive_frame(ws)
+                assert last["index"] == 5  # the latest, the ones between dropped
+                await ws.send_str('{"type": "ready", "extra": 1}')  # checked like any message
+
+        asyncio.run(go())
+        assert s.rejected == 1 and s.accepted == 0  # acknowledgements are not counted as requests
+    finally:
+        s.stop()

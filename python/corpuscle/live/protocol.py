@@ -16,7 +16,9 @@ Server -> page, over one websocket:
 Page -> server: JSON text, at most :data:`MAX_MESSAGE` bytes: ``{"type": "control", <control
 name>: [numbers], ...}`` (one or more of the run's controls; a control not named keeps its
 value), ``{"type": "pause"}``, ``{"type": "resume"}``, ``{"type": "color", "field":
-name|null}`` and, for a recorded run, ``{"type": "seek", "frame": i}``. :func:`parse_message`
+name|null}``, ``{"type": "ready"}`` (the page drew a frame: flow control, at most
+``server.CREDITS`` frames are sent ahead of the page's drawing once it says it) and, for a
+recorded run, ``{"type": "seek", "frame": i}``. :func:`parse_message`
 checks one (size, JSON, type, exactly the keys the type takes, a control's length, finite
 numbers, its norm bound and its sliders' range) and raises :class:`MessageError` naming what is
 wrong.
@@ -212,7 +214,7 @@ def parse_message(raw: str | bytes, controls: dict[str, int], fields: list[str] 
         if extra:
             raise MessageError(f"{kind} message: unknown key {extra[0][:40]!r}")
 
-    if kind in ("pause", "resume"):
+    if kind in ("pause", "resume", "ready"):
         keys(set())
         return {"type": kind}
     if kind == "control":

@@ -27,6 +27,7 @@ CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' 
        "connect-src 'self'; frame-ancestors 'none'")
 LOCAL_NAMES = {"localhost", "127.0.0.1", "::1"}
 TRANSPORT_LIMIT = 64 * 1024  # a websocket message over this closes the connection
+CREDITS = 2  # frames in flight to a page that acknowledges them (one drawn, one on its way)
 
 
 class ServerError(OSError):
@@ -62,6 +63,10 @@ class _Client:
         self.dirty = True
         self.want: int | None = None
         self.sent = 0
+        # flow control: a page that says "ready" after drawing a frame is sent at most
+        # CREDITS frames it has not drawn yet (None: a client that never says it; the
+        # socket's own back-pressure only)
+        self.credits: int | None = None
 
 
 class LiveServer:
@@ -345,8 +350,9 @@ class LiveServer:
         except protocol.MessageError as exc:
             self._reject(client.peer, str(exc))
             return
-        self.accepted += 1
         kind = msg["type"]
+        if kind != "ready":  # (flow control is not counted: tests count what the page asked for)
+            self.accepted += 1
         if kind == "control":
             with self._lock:
                 self._current.update({k: v for k, v in msg.items() if k != "type"})
@@ -362,6 +368,9 @@ class LiveServer:
         elif kind == "seek":
             client.want = msg["frame"]
             client.event.set()
+        elif kind == "ready":  # the page drew a frame: it may have another
+            client.credits = min(CREDITS, (client.credits if client.credits is not None else CREDITS - 1) + 1)
+            client.event.set()
 
     async def _sender(self, client: _Client) -> None:
         loop = asyncio.get_running_loop()
@@ -370,6 +379,8 @@ class LiveServer:
             while not client.ws.closed:
                 await client.event.wait()
                 client.event.clear()
+                if client.credits is not None and client.credits <= 0:
+                    continue  # the page has not drawn what it was sent: the next "ready" wakes this
                 if self.mode == "live":
                     with self._lock:
                         latest = self._latest
@@ -390,6 +401,8 @@ class LiveServer:
                 await client.ws.send_bytes(data)  # waits while this client's socket is full
                 client.sent_seq = seq
                 client.sent += 1
+                if client.credits is not None:
+                    client.credits -= 1
         except (asyncio.CancelledError, ConnectionError):
             pass
         except Exception as exc:  # noqa: BLE001 - one client's failure never reaches the run

@@ -14,7 +14,9 @@
   };
   window.corpuscleViewer = S;
   const canvas = $('view');
-  const gl = canvas.getContext('webgl2', { antialias: true, preserveDrawingBuffer: true });
+  // no multisampling: it multiplies the fragments a million point sprites cost (4x on a
+  // software rasteriser); the drawing buffer is kept for screenshots (tests, docs)
+  const gl = canvas.getContext('webgl2', { antialias: false, preserveDrawingBuffer: true });
   if (!gl) { $('status').textContent = 'WebGL2 is not available in this browser'; S.errors.push('no webgl2'); return; }
   const dbg = gl.getExtension('WEBGL_debug_renderer_info');
   S.renderer = dbg ? gl.getParameter(dbg.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
@@ -25,7 +27,10 @@
       c3=vec3(-4.6342,-5.7991,-19.3324), c4=vec3(6.2283,14.1799,56.6906), c5=vec3(4.7764,-13.7451,-65.3530),
       c6=vec3(-5.4355,4.6459,26.3124);
     return c0+t*(c1+t*(c2+t*(c3+t*(c4+t*(c5+t*c6))))); }`;
-  // positions come as normalised uint16 (x = lo + q (hi - lo)); a 2-D frame's z is 0
+  // positions come as normalised uint16 (x = lo + q (hi - lo)); a 2-D frame's z is 0. Each
+  // particle is a point sprite at its centre's depth, shaded as a lit sphere (no per-fragment
+  // depth: writing gl_FragDepth turns off the early depth test). Instanced quads were tried:
+  // a software rasteriser (SwiftShader) draws them ten times slower than points
   const PVS = `#version 300 es
     in vec3 aPos; in float aCol;
     uniform vec3 uLo, uSpan; uniform mat4 uView, uProj; uniform float uRadius, uScale, uPersp; uniform int uDim;
@@ -34,13 +39,12 @@
       vec4 v = uView*vec4(p, 1.0); gl_Position = uProj*v;
       gl_PointSize = clamp(2.0*uRadius*uScale/mix(1.0, max(-v.z, 1e-4), uPersp), 1.5, 256.0); vCol = aCol; }`;
   const PFS = `#version 300 es
-    precision highp float; in float vCol; uniform int uHasCol; out vec4 color; ${RAMP}
+    precision mediump float; in float vCol; uniform int uHasCol; out vec4 color; ${RAMP}
     void main(){ vec2 c = gl_PointCoord*2.0-1.0; float r2 = dot(c,c); if (r2 > 1.0) discard;
-      vec3 n = vec3(c.x, -c.y, sqrt(1.0-r2)); vec3 L = normalize(vec3(0.45,0.6,0.75));
+      vec3 n = vec3(c.x, -c.y, sqrt(1.0-r2)); const vec3 L = vec3(0.4319, 0.5759, 0.7199);
       float d = max(dot(n,L),0.0); float s = pow(max(dot(reflect(-L,n), vec3(0,0,1)),0.0), 24.0);
       vec3 base = uHasCol == 1 ? ramp(vCol) : vec3(0.30,0.58,0.92);
-      color = vec4(base*(0.30+0.70*d) + 0.25*s, 1.0);
-      gl_FragDepth = gl_FragCoord.z - 0.0005*n.z; }`;
+      color = vec4(base*(0.30+0.70*d) + 0.25*s, 1.0); }`;
   const LVS = `#version 300 es
     in vec3 aPos; uniform mat4 uView, uProj; uniform float uPointSize;
     void main(){ gl_Position = uProj*uView*vec4(aPos,1.0); gl_PointSize = uPointSize; }`;
@@ -296,8 +300,24 @@
     gl.uniform4fv(L.u.uColor, color); gl.uniform1f(L.u.uPointSize, size || 1); gl.uniform1i(L.u.uRound, round ? 1 : 0);
     gl.drawArrays(mode, 0, data.length / 3);
   }
+  let upload = null;
+  function uploadFrame() {
+    const u = upload; upload = null;
+    gl.bindVertexArray(pointVao);
+    gl.bindBuffer(gl.ARRAY_BUFFER, posBuf); gl.bufferData(gl.ARRAY_BUFFER, u.q, gl.DYNAMIC_DRAW);
+    gl.enableVertexAttribArray(P.aPos);
+    gl.vertexAttribPointer(P.aPos, u.dim, gl.UNSIGNED_SHORT, true, 0, 0);  // a 2-D frame's z: the default 0
+    hasColor = u.color;
+    if (hasColor) {
+      gl.bindBuffer(gl.ARRAY_BUFFER, colBuf); gl.bufferData(gl.ARRAY_BUFFER, new Uint8Array(u.buf, u.off, u.n), gl.DYNAMIC_DRAW);
+      gl.enableVertexAttribArray(P.aCol); gl.vertexAttribPointer(P.aCol, 1, gl.UNSIGNED_BYTE, true, 0, 0);
+    } else if (P.aCol >= 0) { gl.disableVertexAttribArray(P.aCol); gl.vertexAttrib1f(P.aCol, 0.5); }
+    gl.bindVertexArray(null);
+    nPoints = u.n;
+  }
   function draw() {
     dirty = false;
+    if (upload) uploadFrame();
     const dpr = window.devicePixelRatio || 1, w = Math.round(canvas.clientWidth * dpr), h = Math.round(canvas.clientHeight * dpr);
     if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
     gl.viewport(0, 0, canvas.width, canvas.height);
@@ -305,7 +325,7 @@
     if (!S.header) return;
     gl.enable(gl.DEPTH_TEST);
     const M = matrices(), f = S.frame;
-    if (f && nPoints) {
+    if (f && nPoints && !S.skipParticles) {  // (skipParticles: the benchmark's transfer-only figure)
       gl.useProgram(P.p); gl.bindVertexArray(pointVao);
       const lo = pad3(f.meta.lo), hi = pad3(f.meta.hi);
       gl.uniform3fv(P.u.uLo, lo); gl.uniform3fv(P.u.uSpan, hi.map((x, i) => x - lo[i]));
@@ -351,7 +371,10 @@
     }
     S.bodiesDrawn = nb;
     gl.enable(gl.DEPTH_TEST);
-    if (newFrame) { S.drawn++; S.drawnIndex = f ? f.index : -1; drawTimes.push(performance.now()); newFrame = false; }
+    if (newFrame) {  // the server sends the next frame once this one is drawn
+      S.drawn++; S.drawnIndex = f ? f.index : -1; drawTimes.push(performance.now()); newFrame = false;
+      send({ type: 'ready' });
+    }
   }
   const drawTimes = [], recvTimes = [];
   function rate(times) {  // events per second over the last second
@@ -416,19 +439,9 @@
     let off = 48;
     const meta = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, off, jlen)));
     off += jlen;
-    const q = new Uint16Array(buf, off, n * dim);
-    off += n * dim * 2; off += (4 - (off % 4)) % 4;
-    gl.bindVertexArray(pointVao);
-    gl.bindBuffer(gl.ARRAY_BUFFER, posBuf); gl.bufferData(gl.ARRAY_BUFFER, q, gl.DYNAMIC_DRAW);
-    gl.enableVertexAttribArray(P.aPos);
-    gl.vertexAttribPointer(P.aPos, dim, gl.UNSIGNED_SHORT, true, 0, 0);  // a 2-D frame's z: the default 0
-    hasColor = cb === 1 && !!meta.color;
-    if (hasColor) {
-      gl.bindBuffer(gl.ARRAY_BUFFER, colBuf); gl.bufferData(gl.ARRAY_BUFFER, new Uint8Array(buf, off, n), gl.DYNAMIC_DRAW);
-      gl.enableVertexAttribArray(P.aCol); gl.vertexAttribPointer(P.aCol, 1, gl.UNSIGNED_BYTE, true, 0, 0);
-    } else if (P.aCol >= 0) { gl.disableVertexAttribArray(P.aCol); gl.vertexAttrib1f(P.aCol, 0.5); }
-    gl.bindVertexArray(null);
-    nPoints = n;
+    // the arrays go to the GPU when the frame is drawn (a frame replaced before then never does)
+    upload = { q: new Uint16Array(buf, off, n * dim), off: off + n * dim * 2 + (((4 - ((n * dim * 2) % 4)) % 4)), buf, n, dim,
+      color: cb === 1 && !!meta.color };
     S.frame = { index, step, time, n, dim, meta };
     if (!S.cameraSet) setupCamera(meta);
     S.framesReceived++; S.lastIndex = index; S.lastStep = step; S.pending = false;
