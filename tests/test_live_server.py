@@ -453,6 +453,10 @@ def test_a_page_that_acknowledges_frames_is_sent_at_most_two_ahead():
                 await ws.send_str('{"type": "ready", "extra": 1}')  # checked like any message
 
         asyncio.run(go())
+        for _ in range(100):
+            if s.rejected:
+                break
+            time.sleep(0.02)
         assert s.rejected == 1 and s.accepted == 0  # acknowledgements are not counted as requests
     finally:
         s.stop()
