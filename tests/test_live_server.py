@@ -460,3 +460,49 @@ def test_a_page_that_acknowledges_frames_is_sent_at_most_two_ahead():
         assert s.rejected == 1 and s.accepted == 0  # acknowledgements are not counted as requests
     finally:
         s.stop()
+
+
+def test_a_flood_of_bad_messages_neither_stalls_the_producer_nor_floods_the_log():
+    s = server()
+    bad = ['{"type": "control", "acceleration": [1e9, 0, 0]}', "{", '{"type": "seek", "frame": 1}', "[]" * 900,
+           '{"type": "control", "pitch": [1]}', '{"type": "color", "field": "nope"}']
+    try:
+        s.publish(frame(0))
+        times = []
+        stop = threading.Event()
+
+        def produce():
+            i = 1
+            while not stop.is_set():
+                t = time.perf_counter()
+                s.publish(frame(i))
+                times.append(time.perf_counter() - t)
+                i += 1
+                time.sleep(0.005)
+
+        async def go():
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(ws_url(s)) as ws:
+                await ws.receive(timeout=10)
+                for k in range(3000):
+                    await ws.send_str(bad[k % len(bad)])
+                first = (await receive_frame(ws))["index"]
+                while (f := await receive_frame(ws))["index"] <= first:
+                    pass  # frames keep coming, newer ones
+                return f
+
+        t = threading.Thread(target=produce, daemon=True)
+        t.start()
+        try:
+            asyncio.run(go())
+        finally:
+            stop.set()
+            t.join()
+        for _ in range(200):
+            if s.rejected >= 3000:
+                break
+            time.sleep(0.02)
+        assert s.rejected == 3000 and s.accepted == 0 and s.take_control() is None
+        assert max(times) < 0.05, max(times)  # publishing never waited on the flood
+        assert len(s.log) < 200 and all(line.startswith("rejected message from 127.0.0.1: ") for line in s.log)
+    finally:
+        s.stop()
