@@ -89,6 +89,11 @@ def test_page_loads_draws_particles_and_counts_frames(page, tmp_path):
         assert "magic8ball" in page.text_content("#title") and page.text_content("#particle-count") == "1,500"
         assert page.text_content("#answer").strip()
         assert page.evaluate("window.corpuscleViewer.errors") == [] and page.errors == []
+        page.evaluate("window.corpuscleViewer.setSize(0.5)")  # the size slider: smaller spheres, the die shows
+        assert page.text_content("#size-value") == "0.50×"
+        page.wait_for_timeout(300)
+        share2, _ = _stats(page.locator("#view").screenshot())
+        assert share2 < share  # less of the canvas covered
         if os.environ.get("CORPUSCLE_SCREENSHOT"):  # docs/live.png
             page.screenshot(path=os.environ["CORPUSCLE_SCREENSHOT"])
     finally:

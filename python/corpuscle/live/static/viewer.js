@@ -330,7 +330,7 @@
       const lo = pad3(f.meta.lo), hi = pad3(f.meta.hi);
       gl.uniform3fv(P.u.uLo, lo); gl.uniform3fv(P.u.uSpan, hi.map((x, i) => x - lo[i]));
       gl.uniformMatrix4fv(P.u.uView, false, M.view); gl.uniformMatrix4fv(P.u.uProj, false, M.proj);
-      gl.uniform1f(P.u.uRadius, (S.scene && S.scene.particle_radius) || S.header.particle_radius || S.cam.extent / 80);
+      gl.uniform1f(P.u.uRadius, S.sizeScale * ((S.scene && S.scene.particle_radius) || S.header.particle_radius || S.cam.extent / 80));
       gl.uniform1f(P.u.uScale, M.scale); gl.uniform1f(P.u.uPersp, M.persp);
       gl.uniform1i(P.u.uDim, S.dim); gl.uniform1i(P.u.uHasCol, hasColor ? 1 : 0);
       gl.drawArrays(gl.POINTS, 0, nPoints);
@@ -602,6 +602,10 @@
     }
   }
   $('shake-drag').addEventListener('change', (e) => { S.shakeDrag = e.target.checked; });
+  // the drawn size of the particles (a view setting: 1 = their radius)
+  S.sizeScale = 1;
+  S.setSize = (x) => { S.sizeScale = +x; $('size').value = x; $('size-value').textContent = `${(+x).toFixed(2)}×`; dirty = true; };
+  $('size').addEventListener('input', (e) => S.setSize(e.target.value));
 
   // ---- pointer: orbit / pan / zoom, and shaking by dragging -----------------------------------
   const SHAKE_GAIN = 0.25;  // m/s² of container acceleration per CSS pixel dragged
