@@ -403,3 +403,22 @@ def test_a_kind_the_page_does_not_know_is_drawn_from_its_header(page, header):
         page.wait_for_function("window.corpuscleViewer.drawRate > 0 || window.corpuscleViewer.drawn > 0", timeout=10_000)
     finally:
         s.stop()
+
+
+def test_a_recorded_wind_tunnel_run_plays_with_its_airfoil_and_forces(page, tmp_path):
+    out = tmp_path / "wt.cps"
+    p = subprocess.run([script(), "run", "wind-tunnel", "--backend", "serial", "--particles", "400", "--steps", "60",
+                        "--every", "20", "--out", str(out), "--no-progress"], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    proc = _Proc("view", str(out), "--port", "0")
+    try:
+        page.goto(proc.url)
+        page.wait_for_function("window.corpuscleViewer.framesReceived >= 1", timeout=30_000)
+        page.evaluate("window.corpuscleViewer.seek(3)")
+        page.wait_for_function("window.corpuscleViewer.lastIndex === 3 && window.corpuscleViewer.drawnIndex === 3",
+                               timeout=30_000)
+        assert page.evaluate("window.corpuscleViewer.obstaclesDrawn") == 1 and page.is_visible("#forces-line")
+        assert page.text_content("#lift").endswith("N/m") and page.is_hidden("#live-controls")
+        assert page.errors == [] and page.evaluate("window.corpuscleViewer.errors") == []
+    finally:
+        assert proc.interrupt() == 0
