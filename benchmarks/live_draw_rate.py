@@ -105,7 +105,8 @@ def main() -> None:
     ap.add_argument("--dim", type=int, choices=(2, 3), default=3)
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--chromium", default=os.environ.get("CORPUSCLE_CHROMIUM") or shutil.which("chromium"))
-    ap.add_argument("--gpu", action="store_true", help="no SwiftShader flags: Chromium picks its GL")
+    ap.add_argument("--gpu", action="store_true", help="no SwiftShader flags: Chromium picks its GL (a GPU if it may)")
+    ap.add_argument("--chromium-arg", action="append", default=[], help="a further Chromium flag (repeatable)")
     ap.add_argument("--radius", type=float, default=None, help="particle radius (m; default 0.0015, the 8-ball's scale)")
     args = ap.parse_args()
     w, h = (int(x) for x in args.size.split("x"))
@@ -114,7 +115,7 @@ def main() -> None:
             hd["particle_radius"] = args.radius
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=args.chromium, args=[] if args.gpu else SWIFTSHADER)
+        browser = pw.chromium.launch(executable_path=args.chromium, args=(["--ignore-gpu-blocklist"] if args.gpu else SWIFTSHADER) + args.chromium_arg)
         page = browser.new_context(viewport={"width": w, "height": h}, bypass_csp=True).new_page()  # wait_for_function evaluates
         try:
             for n in args.n:
