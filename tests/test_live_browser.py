@@ -1,7 +1,11 @@
 """The live viewer's page in headless Chromium (Playwright from PyPI driving Debian's
 `chromium`, or Playwright's own browser where one is installed): the page loads, draws
-particles, counts frames, sends shake keys into the simulation and scrubs a recorded run.
-Skipped, with the reason, where no Chromium is available (`.ci/run` installs Debian's)."""
+particles, counts frames, sends shake keys and drags into the simulation's control (no
+rebuild), pauses and resumes the run, scrubs a recorded run; draws the wind tunnel's airfoil
+(filled where it is, turned by its pitch), shows lift and drag, and its sliders steer the
+inflow speed and the angle of attack; pans and zooms in 2-D; draws kinds it has never seen
+from their headers. Skipped, with the reason, where no Chromium is available (`.ci/run`
+installs Debian's)."""
 from __future__ import annotations
 
 import asyncio  # noqa: F401 - the server tests' helpers are shared

@@ -3,8 +3,10 @@
 Server -> page, over one websocket:
 
 1. one text message, JSON: ``{"type": "hello", "mode": "live"|"view", "header": <run header>,
+   "scene": <the header's geometry checked and normalised (render's ``scene_info``), or null>,
    "fields": [colourable field names], "controls": {name: length}, "limits": {name: max norm},
-   "frames": <recorded frames, view mode>}``;
+   "control": {name: current values}, "sliders": [the kind's sliders, ``Kind.live_controls``],
+   "frames": <recorded frames, view mode>, "paused": bool, "max_message": bytes}``;
 2. then binary frames, each: a 48-byte little-endian header (:data:`HEAD`: magic ``CPSL``,
    version, flags, frame index, step, time, particle count, dimension, JSON length, colour
    bytes per particle), the JSON overlay (diagnostics, the kind's result, rigid poses, the
