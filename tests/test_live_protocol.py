@@ -60,8 +60,8 @@ def test_non_finite_overlay_values_are_null():
 def test_valid_messages(msg):
     out = protocol.parse_message(json.dumps(msg), CONTROLS, fields=["density"])
     assert out["type"] == msg["type"]
-    if msg["type"] == "control":
-        assert out["torque"] == [float(x) for x in msg.get("torque", [0, 0, 0])]
+    if msg["type"] == "control":  # only the controls named (the server keeps the others)
+        assert set(out) == set(msg) and out["acceleration"] == [float(x) for x in msg["acceleration"]]
 
 
 @pytest.mark.parametrize("raw, reason", [
@@ -79,6 +79,16 @@ def test_valid_messages(msg):
     ('{"type": "control", "torque": [0, 0, 50]}', "norm above"),
     ('{"type": "control", "gravity": [0, 0, 0]}', "unknown key"),
     ('{"type": "pause", "now": 1}', "unknown key"),
+    ('{"type": "control"}', "names no control"),
+    ('{"type": "control", "acceleration": {"x": 1}}', "list of 3 numbers"),
+    ('{"type": "control", "acceleration": null}', "list of 3 numbers"),
+    ('{"type": "color", "field": 3}', "unknown field"),
+    ('{"type": "color"}', "without its field"),
+    ('{"type": null}', "unknown message type"),
+    ('{"type": ["control"]}', "unknown message type"),
+    ('"control"', "not a JSON object"),
+    ("", "not JSON"),
+    ('{"type": "control", "acceleration": [1, 0, 0]} trailing', "not JSON"),
     ('{"type": "color", "field": "secret"}', "unknown field"),
     ('{"type": "seek", "frame": 3}', "unknown message type"),  # not in a live run
     (b'{"type": "pause"}', "binary"),
@@ -96,3 +106,21 @@ def test_seek_is_checked_against_the_frame_count():
     for bad in ('{"type": "seek", "frame": 5}', '{"type": "seek", "frame": -1}', '{"type": "seek", "frame": 1.5}'):
         with pytest.raises(protocol.MessageError, match="seek"):
             protocol.parse_message(bad, {}, frames=5)
+
+
+SLIDERS = [{"control": "speed_scale", "min": 0.2, "max": 6.0, "scale": 0.5, "offset": -1.0},
+           {"control": "pitch", "min": -30.0, "max": 40.0, "scale": 1.0, "offset": -10.0}]
+
+
+def test_slider_ranges_bound_their_controls():
+    ranges = protocol.slider_ranges(SLIDERS)
+    assert ranges == {"speed_scale": [(-0.9, 2.0)], "pitch": [(-40.0, 30.0)]}
+    controls = {"speed_scale": 1, "pitch": 1}
+    ok = protocol.parse_message('{"type": "control", "pitch": [-40]}', controls, ranges=ranges)
+    assert ok == {"type": "control", "pitch": [-40.0]}
+    assert protocol.parse_message('{"type": "control", "speed_scale": [2.0], "pitch": [0]}', controls,
+                                  ranges=ranges)["speed_scale"] == [2.0]
+    for bad in ('{"type": "control", "pitch": [31]}', '{"type": "control", "speed_scale": [-0.95]}',
+                '{"type": "control", "speed_scale": [0.5], "pitch": [-41]}'):
+        with pytest.raises(protocol.MessageError, match="outside"):
+            protocol.parse_message(bad, controls, ranges=ranges)

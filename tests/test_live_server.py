@@ -389,3 +389,120 @@ def test_view_serves_a_recorded_run_and_seeks(tmp_path):
     text = "".join(proc.lines)
     assert rc == 0, text
     assert "viewing" in text and "4 frames" in text and "cannot be steered" in text
+
+
+def test_run_live_wind_tunnel_sliders_and_frames_between_recorded_ones(tmp_path):
+    out = tmp_path / "wt.cps"
+    # a frame is recorded every 100000 steps: the page still sees the run move, and its
+    # control is taken within a frame, not at the next recorded one
+    proc = _Proc("run", "wind-tunnel", "--backend", "serial", "--particles", "500", "--steps", "100000000",
+                 "--every", "100000", "--live", "--port", "0", "--out", str(out), "--no-progress")
+    try:
+        async def go():
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(f"ws://127.0.0.1:{proc.port}/ws") as ws:
+                hello = json.loads((await ws.receive(timeout=30)).data)
+                assert hello["controls"] == {"speed_scale": 1, "pitch": 1}
+                assert hello["control"] == {"speed_scale": [0.0], "pitch": [0.0]}
+                assert [s["control"] for s in hello["sliders"]] == ["speed_scale", "pitch"]
+                ob = hello["scene"]["obstacles"][0]
+                assert ob["type"] == "polygon" and ob["turn"]["diagnostic"] == "pitch" and len(ob["points"]) > 10
+                a = await receive_frame(ws, 30)
+                b = await receive_frame(ws, 30)
+                assert 0 < b["step"] - a["step"] < 100000 and b["step"] < 100000
+                await ws.send_str('{"type": "control", "pitch": [4.5]}')
+                await ws.send_str('{"type": "control", "pitch": [60]}')  # outside the slider's range: rejected
+                t = time.time()
+                while time.time() - t < 30:
+                    f = await receive_frame(ws, 30)
+                    if f["meta"]["diagnostics"].get("pitch") == 4.5:
+                        break
+                assert f["meta"]["control"] == {"speed_scale": [0.0], "pitch": [4.5]} and f["step"] < 100000
+                assert f["meta"]["diagnostics"]["lift"] is not None and "cl" in f["meta"]["result"]
+
+        asyncio.run(go())
+    finally:
+        rc = proc.interrupt()
+    text = "".join(proc.lines)
+    assert rc == 130, text
+    assert "rejected message from 127.0.0.1: control 'pitch'[0] = 60 is outside" in text and "Traceback" not in text
+
+
+def test_a_page_that_acknowledges_frames_is_sent_at_most_two_ahead():
+    s = server()
+    try:
+        s.publish(frame(0))
+
+        async def go():
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(ws_url(s)) as ws:
+                await ws.receive(timeout=10)
+                assert (await receive_frame(ws))["index"] == 0
+                await ws.send_str('{"type": "ready"}')  # drew frame 0: flow control from here on
+                got = []
+                for i in range(1, 6):
+                    s.publish(frame(i))
+                    await asyncio.sleep(0.15)
+                while True:
+                    try:
+                        got.append(await receive_frame(ws, timeout=0.5))
+                    except asyncio.TimeoutError:
+                        break
+                assert [g["index"] for g in got] == [1, 2]  # two credits: no more until the page draws one
+                await ws.send_str('{"type": "ready"}')
+                last = await receive_frame(ws)
+                assert last["index"] == 5  # the latest, the ones between dropped
+                await ws.send_str('{"type": "ready", "extra": 1}')  # checked like any message
+
+        asyncio.run(go())
+        for _ in range(100):
+            if s.rejected:
+                break
+            time.sleep(0.02)
+        assert s.rejected == 1 and s.accepted == 0  # acknowledgements are not counted as requests
+    finally:
+        s.stop()
+
+
+def test_a_flood_of_bad_messages_neither_stalls_the_producer_nor_floods_the_log():
+    s = server()
+    bad = ['{"type": "control", "acceleration": [1e9, 0, 0]}', "{", '{"type": "seek", "frame": 1}', "[]" * 900,
+           '{"type": "control", "pitch": [1]}', '{"type": "color", "field": "nope"}']
+    try:
+        s.publish(frame(0))
+        times = []
+        stop = threading.Event()
+
+        def produce():
+            i = 1
+            while not stop.is_set():
+                t = time.perf_counter()
+                s.publish(frame(i))
+                times.append(time.perf_counter() - t)
+                i += 1
+                time.sleep(0.005)
+
+        async def go():
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(ws_url(s)) as ws:
+                await ws.receive(timeout=10)
+                for k in range(3000):
+                    await ws.send_str(bad[k % len(bad)])
+                first = (await receive_frame(ws))["index"]
+                while (f := await receive_frame(ws))["index"] <= first:
+                    pass  # frames keep coming, newer ones
+                return f
+
+        t = threading.Thread(target=produce, daemon=True)
+        t.start()
+        try:
+            asyncio.run(go())
+        finally:
+            stop.set()
+            t.join()
+        for _ in range(200):
+            if s.rejected >= 3000:
+                break
+            time.sleep(0.02)
+        assert s.rejected == 3000 and s.accepted == 0 and s.take_control() is None
+        assert max(times) < 0.05, max(times)  # publishing never waited on the flood
+        assert len(s.log) < 200 and all(line.startswith("rejected message from 127.0.0.1: ") for line in s.log)
+    finally:
+        s.stop()

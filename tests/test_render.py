@@ -574,3 +574,18 @@ def test_live_render_left_by_an_exception_leaves_nothing(damaged):
             live.add_frame(frames[k])
             assert not list((work / "live").glob("frame_*.png"))
     assert listing(work) == {"live"} | {f"live/frame_{k:05d}.png" for k in range(3)}
+
+
+def test_an_obstacle_is_drawn_turned_by_its_frames_diagnostic():
+    from corpuscle._viz_common import turned_points
+
+    ob = {"type": "polygon", "points": [[1.0, 0.0], [2.0, 0.0], [2.0, 1.0]],
+          "turn": {"diagnostic": "pitch", "about": [1.0, 0.0], "sign": -1.0}}
+    same = turned_points(ob, {"pitch": 0.0})
+    assert np.array_equal(same, ob["points"]) and np.array_equal(turned_points(ob, {}), ob["points"])
+    t = turned_points(ob, {"pitch": 90.0})  # a quarter turn clockwise about (1, 0)
+    assert np.allclose(t, [[1.0, 0.0], [1.0, -1.0], [2.0, -1.0]])
+    assert np.array_equal(turned_points(ob, {"pitch": float("nan")}), ob["points"])
+    assert turned_points({"type": "box", "min": [0, 0, 0], "max": [1, 1, 1]}, {"pitch": 1.0}) is None
+    bad = dict(ob, turn={"diagnostic": "pitch", "about": "here"})
+    assert np.array_equal(turned_points(bad, {"pitch": 5.0}), ob["points"])

@@ -219,3 +219,118 @@ def test_speed_scale_control_changes_the_reentering_stream():
     with pytest.raises(ValueError):
         sim.set_control(speed_scale=-1.0)
     assert len(np.unique(ids)) == sim.n_particles
+
+
+# ---- the pitch control: the angle of attack changed while running ------------------------
+
+
+def _pitched_pair(aoa=6.0, pitch=9.0, particles=400):
+    """A scene at aoa steered by the pitch control, and one built at aoa + pitch about the
+    same quarter chord, with the same particles: some touching the second one's airfoil."""
+    a = make("serial", particles=particles, airfoil__angle_of_attack=aoa)
+    c = a.info["chord"]
+    q = np.asarray(a.params["quarter_chord"], dtype=np.float64)
+    t = math.radians(aoa + pitch)
+    le = q - 0.25 * c * np.array([math.cos(t), -math.sin(t)])
+    b = make("serial", particles=particles, airfoil__angle_of_attack=aoa + pitch, airfoil__leading_edge=le.tolist())
+    assert np.allclose(b.params["quarter_chord"], q, atol=1e-12)
+    poly, r = b.info["airfoil"], a.info["radius"]
+    lo, hi = channel(a)
+    # near the pitched surface: its edges' midpoints pushed out by 0.6 radius along the edge's
+    # normal (in contact; off the medial axis, where the closest edge, and so the force's
+    # direction, jumps), the rest on a coarse lattice downstream
+    e = np.roll(poly, -1, axis=0) - poly
+    nv = np.column_stack([e[:, 1], -e[:, 0]]) / np.linalg.norm(e, axis=1)[:, None]  # outward (counter-clockwise)
+    near = []
+    for x in poly + 0.5 * e + 0.6 * r * nv:  # at least a diameter apart: no pair contacts among them
+        if wt.signed_distance(poly, x[None])[0] > 0.2 * r and all(np.linalg.norm(x - y) > 2.05 * r for y in near):
+            near.append(x)
+    near = np.asarray(near)
+    k = particles - len(near)
+    xs = np.linspace(0.5 * (poly[:, 0].max() + hi[0]), hi[0] - 3 * r, 20)  # downstream, clear of the airfoil
+    ys = np.linspace(lo[1] + 3 * r, hi[1] - 3 * r, (k + 19) // 20)
+    far = np.column_stack([g.ravel() for g in np.meshgrid(xs, ys)])[:k]
+    pos = np.vstack([near, far]).astype(np.float32)
+    vel = np.zeros_like(pos)
+    vel[:, 0] = 1.0
+    for sim in (a, b):
+        sim.set_particles(pos, vel)
+    a.set_control(pitch=pitch)
+    return a, b, near
+
+
+def test_the_pitch_control_turns_the_airfoil_about_the_quarter_chord():
+    a, b, near = _pitched_pair()
+    sa, sb = a.evaluate(), b.evaluate()
+    assert sb["airfoil_contacts"] >= 10 and sa["airfoil_contacts"] == sb["airfoil_contacts"]
+    # the same contact forces as the airfoil built at the new angle (float32 rounding of the
+    # rotated polygon apart), on every particle, and the same reaction and moment
+    fa, fb = a.field("force").astype(np.float64), b.field("force").astype(np.float64)
+    scale = np.abs(fb).max()
+    assert scale > 0 and np.abs(fa - fb).max() <= 1e-4 * scale
+    for k, unit in (("lift", 1.0), ("drag", 1.0), ("moment", a.info["chord"])):
+        assert sa[k] == pytest.approx(sb[k], rel=1e-4, abs=1e-4 * scale * unit), k
+    # unpitched, the airfoil touches fewer of them and feels another force
+    a.set_control(pitch=0.0)
+    s0 = a.evaluate()
+    assert s0["airfoil_contacts"] < sa["airfoil_contacts"] and abs(s0["lift"] - sa["lift"]) > 0.05 * abs(sa["lift"])
+    assert a.diagnostics()["pitch"] == 0.0 and a.control == {"speed_scale": [0.0], "pitch": [0.0]}
+
+
+def test_no_particle_ends_inside_the_pitched_airfoil():
+    a, b, near = _pitched_pair(pitch=-12.0)
+    poly = b.info["airfoil"]  # where the pitched airfoil is
+    pos = a.positions.astype(np.float64)
+    inside = np.flatnonzero(wt.signed_distance(poly, pos) < 0)
+    assert inside.size == 0
+    # particles put inside the pitched airfoil (outside the built one) are pushed out
+    c = poly.mean(axis=0)
+    pos[:5] = c + np.array([[0.0, 0.0], [0.01, 0.0], [-0.01, 0.0], [0.02, -0.002], [-0.02, 0.002]]) * a.info["chord"]
+    assert np.all(wt.signed_distance(poly, pos[:5]) < 0)
+    a.set_particles(pos.astype(np.float32), a.velocities)
+    a.set_control(pitch=-12.0)
+    a.step(3)
+    assert a.state()["pushouts"] >= 5
+    assert np.all(wt.signed_distance(poly, a.positions.astype(np.float64)) >= -1e-6)
+    assert a.diagnostics()["pitch"] == -12.0
+
+
+def test_pitch_control_is_checked_and_kept_in_checkpoints():
+    sim = make("serial", particles=300)
+    for bad, err in ((60.0, ValueError), (float("nan"), ValueError), (True, TypeError), ("3", TypeError)):
+        with pytest.raises(err, match="pitch"):
+            sim.set_control(pitch=bad)
+    sim.set_control(speed_scale=0.25, pitch=7.5)
+    assert sim.control == {"speed_scale": [0.25], "pitch": [7.5]}
+    sim.step(20)
+    ck = sim.checkpoint()
+    again = Simulation(sim.scene, backend="serial", checkpoint=ck)
+    assert again.control == {"speed_scale": [0.25], "pitch": [7.5]}
+    sim.step(30)
+    again.step(30)
+    assert np.array_equal(sim.positions, again.positions)
+    assert sim.header()["obstacles"][0]["turn"] == {"diagnostic": "pitch", "about": list(sim.params["quarter_chord"]),
+                                                    "sign": -1.0}
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not Simulation.cuda_available(), reason="no usable CUDA backend (build or device)")
+def test_cuda_pitched_airfoil_matches_cpu():
+    cpu, _, near = _pitched_pair(pitch=9.0)
+    cuda = make("cuda", particles=cpu.n_particles, airfoil__angle_of_attack=6.0)
+    ids = np.argsort(cpu.field("id"))
+    cuda.set_particles(cpu.positions[ids], cpu.velocities[ids])
+    cuda.set_control(pitch=9.0)
+    sc, sg = cpu.evaluate(), cuda.evaluate()
+    assert sc["airfoil_contacts"] >= 10 and sg["airfoil_contacts"] == sc["airfoil_contacts"]
+
+    def by_id(sim, name):
+        out = np.empty_like(np.asarray(sim.field(name)))
+        out[np.asarray(sim.field("id"))] = np.asarray(sim.field(name))
+        return out
+
+    fc, fg = by_id(cpu, "force"), by_id(cuda, "force")
+    # the device's cosf/sinf against the host's: the same rotation to a few float32 ulps
+    assert np.abs(fg - fc).max() <= 1e-4 * np.abs(fc).max()
+    for k in ("lift", "drag"):
+        assert sg[k] == pytest.approx(sc[k], rel=1e-4, abs=1e-4 * np.abs(fc).max())

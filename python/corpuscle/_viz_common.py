@@ -393,6 +393,34 @@ def _check_obstacle(ob: Any, k: int) -> dict:
     return out
 
 
+def turned_points(ob: dict, diagnostics: dict | None):
+    """An obstacle's points (n, 2 or 3) as a frame shows them: turned counter-clockwise about
+    ``turn.about`` by ``turn.sign`` times the frame's diagnostic ``turn.diagnostic`` (degrees),
+    as the wind tunnel's pitch turns its airfoil (docs/frame_format.md, "Run header"); as
+    given without a ``turn`` or that diagnostic; float64 arrays. None: the obstacle has no points."""
+    import numpy as np
+
+    pts = ob.get("points")
+    if pts is None:
+        return None
+    p = np.asarray(pts, dtype=np.float64)
+    turn = ob.get("turn") if isinstance(ob.get("turn"), dict) else None
+    if turn is None or not diagnostics:
+        return p
+    try:
+        angle = float(turn.get("sign", 1.0)) * float(diagnostics.get(str(turn.get("diagnostic")), math.nan))
+        about = np.asarray(turn["about"], dtype=np.float64)[:2]
+    except (KeyError, TypeError, ValueError):
+        return p
+    if not math.isfinite(angle) or angle == 0.0 or about.shape != (2,) or not np.all(np.isfinite(about)):
+        return p
+    a = math.radians(angle)
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    out = p.copy()
+    out[:, :2] = about + (p[:, :2] - about) @ rot.T
+    return out
+
+
 def _check_body(b: Any, k: int) -> dict:
     if not isinstance(b, dict):
         raise HeaderError(f"run header: bodies[{k}] must be an object, got {_short(b)}")

@@ -743,6 +743,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     k = (now // every + 1) * every - now
                     if left is not None:
                         k = min(k, left)
+                    if viewer is not None:
+                        k = viewer.chunk(k)  # short chunks: the page's control is taken within a frame
                     taken = int(sim.step(k))
                     progress.update(int(sim.steps) - start_steps, float(sim.time), time.perf_counter() - t0)
                     message = sim.check_health()
@@ -755,8 +757,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
                         break  # nothing left to do (the end time was reached)
                     now = int(sim.steps)
                     final = ((plan.end_step is not None and now >= plan.end_step) or sim.time >= plan.end_time)
+                    if viewer is not None and not final and now % every != 0:
+                        viewer.stepped(sim)  # between recorded frames: the page may get one
+                        continue
                     _record(sink, sim, args, live, kind_at(now, final))
                     last_recorded = now
+                    if viewer is not None:
+                        viewer.stepped(sim, recorded=True)
             except KeyboardInterrupt:
                 interrupted = True
                 if int(sim.steps) > last_recorded:

@@ -32,7 +32,7 @@ import numpy as np
 from . import _camera, _colors, _overlay
 from ._video import VideoSink, open_sink, output_kind
 from ._viz_common import (os_reason, cli_warnings, open_run, parse_frames, parse_index, parse_size, require,
-                          scene_info, units_of)
+                          scene_info, turned_points, units_of)
 
 
 class RenderError(ValueError):
@@ -558,11 +558,11 @@ class FrameRenderer:
             pos = np.asarray(state.get("position", [0, 0]), float)[:2]
             quad = pos + (np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * he) @ rot.T
             self._polygon(img, quad, DIE_RGB, OBSTACLE_EDGE)
-        # obstacles filled and outlined
+        # obstacles filled and outlined (turned as the frame's diagnostics say: the wind tunnel's pitch)
         for ob in self.scene.obstacles:
-            pts = ob.get("points")
+            pts = turned_points(ob, getattr(frame, "diagnostics", None))
             if pts is not None and len(pts) >= 3:
-                self._polygon(img, np.asarray(pts, float)[:, :2], OBSTACLE_FILL, OBSTACLE_EDGE)
+                self._polygon(img, pts[:, :2], OBSTACLE_FILL, OBSTACLE_EDGE)
         # walls: the container's edges
         c = self.scene.container or {}
         if c.get("type") == "box":

@@ -146,6 +146,7 @@ class Simulation:
         self.core = CoreHandle(_core().Simulation(kind.name, self.backend, self.neighbors, built.params,
                                                   built.arrays, self.device))
         self._fields = [dict(f) for f in self.core.fields()]
+        self._control = {str(k): [0.0] * int(v) for k, v in dict(self.core.controls()).items()}
         if checkpoint is not None:
             self.restore(checkpoint)
         else:
@@ -258,7 +259,15 @@ class Simulation:
         ``set_control(acceleration=(ax, ay, az), torque=(tx, ty, tz))``, the container's
         linear acceleration in m/s² and the shell torque in N·m, added to the scene's shake
         schedule; a control not given is zero); every backend applies it identically."""
-        self.core.set_control(self.kind.control(self, *args, **kwargs))
+        values = self.kind.control(self, *args, **kwargs)
+        self.core.set_control(values)
+        self._control.update({k: [float(x) for x in v] for k, v in values.items()})
+
+    @property
+    def control(self) -> dict[str, list[float]]:
+        """The control input the next steps take, as the core holds it: name -> values
+        (what :meth:`set_control` last set, or a restored checkpoint's; zeros at first)."""
+        return {k: list(v) for k, v in self._control.items()}
 
     def evaluate(self) -> dict:
         """Compute densities, pressures, accelerations and this state's reductions without
@@ -313,6 +322,9 @@ class Simulation:
         full = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in state.items() if k not in skip}
         full.update(arrays)
         self.core.restore(full)
+        for name, values in self._control.items():  # the core restored the checkpoint's control, or zeros
+            given = state.get(f"control_{name}", [0.0] * len(values))
+            self._control[name] = [float(x) for x in np.atleast_1d(np.asarray(given, dtype=np.float64))]
 
     @property
     def checkpoint_fields(self) -> dict[str, str]:

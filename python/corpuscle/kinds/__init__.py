@@ -85,6 +85,12 @@ Changing the state
     then the ``position`` and ``velocity`` fields uploaded.
 ``check_positions(sim, positions)`` *
     Raise ValueError for positions the scene cannot hold (default: none).
+``live_controls(sim)`` *
+    Sliders for the live page (``corpuscle run --live``): a list of ``{"control", "index",
+    "label", "unit", "min", "max", "step", "value", "scale", "offset"}``, the control's
+    component ``index`` being ``scale * value + offset`` for a slider at ``value`` (the wind
+    tunnel's inflow speed in m/s and angle of attack in degrees); messages outside a slider's
+    range are rejected. Default: none.
 ``methods`` *
     Names of further methods of the kind that the simulation offers as its own:
     ``sim.set_die(...)`` calls ``kind.set_die(sim, ...)``. They must not shadow an
@@ -225,6 +231,9 @@ class Kind:
 
     def check_positions(self, sim, positions: np.ndarray) -> None:
         return None
+
+    def live_controls(self, sim) -> list[dict[str, Any]]:
+        return []
 
 
 # ---- the registry ------------------------------------------------------------------------

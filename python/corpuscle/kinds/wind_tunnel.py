@@ -17,6 +17,7 @@ unit mass (its accelerations are its forces).
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,9 @@ __all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "resti
            "airfoil_polygon", "coefficients"]
 
 # the default particle counts: the seed's on CUDA, the original's CPU size elsewhere
+# the largest pitch the control takes (degrees, either way)
+MAX_PITCH = 45.0
+
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
 
 UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)"}
@@ -190,7 +194,7 @@ class WindTunnel(Kind):
     unstable_reasons = UNSTABLE_REASONS
     frame_fields = ("position", "pressure")
     units = {"position": "m", "velocity": "m/s", "pressure": "N/m", "force": "N/m", "lift": "N/m", "drag": "N/m",
-             "moment": "N", "kinetic_energy": "J", "vmax": "m/s", "airfoil_contacts": "count"}
+             "moment": "N", "pitch": "deg", "kinetic_energy": "J", "vmax": "m/s", "airfoil_contacts": "count"}
 
     def summary(self, result: dict[str, Any]) -> tuple[list[str], dict[str, Any]]:
         lines = []
@@ -316,7 +320,9 @@ class WindTunnel(Kind):
 
     def diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:
         st = self.state(sim, s)
-        return {k: float(st[k]) for k in ("lift", "drag", "moment", "kinetic_energy", "vmax", "airfoil_contacts")}
+        out = {k: float(st[k]) for k in ("lift", "drag", "moment", "kinetic_energy", "vmax", "airfoil_contacts")}
+        out["pitch"] = float(sim.control["pitch"][0])
+        return out
 
     def averages(self, sim, s: dict[str, Any]) -> dict[str, Any]:
         """Mean lift, drag, moment and their standard errors from the block means (batch
@@ -349,16 +355,42 @@ class WindTunnel(Kind):
         p = sim.params
         return {"container": {"type": "box", "min": list(p["channel_lo"]), "max": list(p["channel_hi"])},
                 "obstacles": [{"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
-                               "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"])}],
+                               "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"]),
+                               "angle_of_attack": float(sim.scene.values["airfoil.angle_of_attack"]),
+                               # the control's pitch turns it (nose up: clockwise) about the quarter chord
+                               "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}],
                 "bodies": [], "particles": sim.n_particles, "particle_radius": sim.info["radius"],
                 "mass": sim.info["mass"], "free_stream": [p["speed"], 0.0], "units": dict(self.units)}
 
-    def control(self, sim, speed_scale=0.0) -> dict[str, list[float]]:
-        """The re-entering free stream's speed is U (1 + speed_scale)."""
-        x = float(speed_scale)
+    def control(self, sim, speed_scale=0.0, pitch=0.0) -> dict[str, list[float]]:
+        """The re-entering free stream's speed is U (1 + speed_scale); the airfoil turns nose
+        up by ``pitch`` degrees about its quarter chord (the angle of attack is the scene's
+        plus the pitch), from the next step on, with no rebuild."""
+        values = {}
+        for name, value in (("speed_scale", speed_scale), ("pitch", pitch)):
+            if isinstance(value, (list, tuple, np.ndarray)) and np.shape(value) == (1,):
+                value = value[0]  # as the core lists it: one number
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+                raise TypeError(f"{name} must be a number, got {value!r}")
+            values[name] = float(value)
+        x, p = values["speed_scale"], values["pitch"]
         if not math.isfinite(x) or x <= -1.0:
             raise ValueError(f"speed_scale must be finite and > -1, got {speed_scale!r}")
-        return {"speed_scale": [x]}
+        if not math.isfinite(p) or abs(p) > MAX_PITCH:
+            raise ValueError(f"pitch must be finite degrees in [-{MAX_PITCH:g}, {MAX_PITCH:g}], got {pitch!r}")
+        return {"speed_scale": [x], "pitch": [p]}
+
+    def angle_of_attack(self, sim) -> float:
+        """Degrees: the scene's angle of attack plus the control's pitch."""
+        return float(sim.scene.values["airfoil.angle_of_attack"]) + float(sim.control["pitch"][0])
+
+    def live_controls(self, sim) -> list[dict[str, Any]]:
+        """The live page's sliders: the inflow speed and the angle of attack."""
+        U, a = float(sim.info["speed"]), float(sim.scene.values["airfoil.angle_of_attack"])
+        return [{"control": "speed_scale", "label": "inflow speed", "unit": "m/s", "min": 0.1 * U, "max": 3.0 * U,
+                 "step": 0.01 * U, "value": U, "scale": 1.0 / U, "offset": -1.0},
+                {"control": "pitch", "label": "angle of attack", "unit": "°", "min": max(a - MAX_PITCH, -90.0),
+                 "max": min(a + MAX_PITCH, 90.0), "step": 0.5, "value": a, "scale": 1.0, "offset": -a}]
 
     def check_positions(self, sim, positions: np.ndarray) -> None:
         lo, hi = np.asarray(sim.params["channel_lo"]), np.asarray(sim.params["channel_hi"])

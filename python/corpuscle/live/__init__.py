@@ -58,12 +58,18 @@ class RunViewer:
     """What ``corpuscle run --live`` adds to its loop: :meth:`publish` each recorded frame,
     :meth:`between_chunks` to apply the page's control and wait while it paused the run."""
 
+    #: the page is sent a frame at most this often between recorded frames (s)
+    FRAME_INTERVAL = 1.0 / 30.0
+
     def __init__(self, server: LiveServer):
         self.server = server
         self.control: dict[str, list[float]] | None = None
         self._frames = 0
         self._rate_at: tuple[int, float] | None = None
         self._rate = math.nan
+        self._published_at = -math.inf
+        self._chunk_at: tuple[int, float] | None = None
+        self._step_seconds = math.nan  # the run's wall time per step, measured between chunks
 
     @classmethod
     def start(cls, sim, header: dict[str, Any], host: str = "127.0.0.1", port: int = 8765,
@@ -71,7 +77,8 @@ class RunViewer:
         controls = {str(k): int(v) for k, v in dict(sim.core.controls()).items()} if hasattr(sim, "core") else {}
         if token is None and not is_local(host):
             token = make_token()
-        server = LiveServer(header, mode="live", host=host, port=port, token=token, controls=controls)
+        server = LiveServer(header, mode="live", host=host, port=port, token=token, controls=controls,
+                            control=getattr(sim, "control", None), sliders=live_sliders(sim))
         return cls(server.start())
 
     @property
@@ -88,9 +95,30 @@ class RunViewer:
         except Exception:  # noqa: BLE001 - the overlay never stops a run
             result = {}
         overlay = {"result": result, "steps_per_second": self._rate, "particles": int(sim.n_particles),
-                   "control": self.control, "paused": self.server.paused}
+                   "control": getattr(sim, "control", self.control), "paused": self.server.paused}
         self.server.publish(frame_from_record(rec, self._frames, step, float(sim.time), overlay))
         self._frames += 1
+        self._published_at = now
+
+    def chunk(self, steps: int) -> int:
+        """How many of the next ``steps`` to take before the page's control is looked at
+        again: about :attr:`FRAME_INTERVAL` of wall time (at least one step), so a control
+        or a pause is taken within a frame and the page sees the run move between recorded
+        frames."""
+        if not math.isfinite(self._step_seconds) or self._step_seconds <= 0:
+            return max(1, min(int(steps), 1))
+        return max(1, min(int(steps), int(self.FRAME_INTERVAL / self._step_seconds)))
+
+    def stepped(self, sim, recorded: bool = False) -> None:
+        """After each chunk: measure the step rate and, where the chunk recorded no frame
+        (``recorded``: it did, and published it), a page is connected and a frame interval
+        has passed, publish the current state (not recorded)."""
+        now, step = time.perf_counter(), int(sim.steps)
+        if self._chunk_at is not None and step > self._chunk_at[0] and now > self._chunk_at[1]:
+            self._step_seconds = (now - self._chunk_at[1]) / (step - self._chunk_at[0])
+        self._chunk_at = (step, now)
+        if not recorded and self.server.clients and now - self._published_at >= self.FRAME_INTERVAL:
+            self.publish(sim, sim.frame())
 
     def apply(self, sim) -> bool:
         """Apply the page's latest control, if one came; True if one did."""
@@ -118,6 +146,27 @@ class RunViewer:
 
     def close(self) -> None:
         self.server.stop()
+
+
+def live_sliders(sim) -> list[dict[str, Any]]:
+    """The kind's sliders for the page (``Kind.live_controls``; none if it has none): each
+    ``{"control", "index", "label", "unit", "min", "max", "step", "value", "scale",
+    "offset"}``, the control component being ``scale * value + offset``."""
+    kind = getattr(sim, "kind", None)
+    fn = getattr(kind, "live_controls", None)
+    if fn is None:
+        return []
+    out = []
+    for sl in fn(sim) or []:
+        sl = dict(sl)
+        sl.setdefault("index", 0)
+        sl.setdefault("scale", 1.0)
+        sl.setdefault("offset", 0.0)
+        sl.setdefault("label", sl["control"])
+        sl.setdefault("unit", "")
+        sl.setdefault("step", (float(sl["max"]) - float(sl["min"])) / 100.0)
+        out.append(sl)
+    return out
 
 
 def serve_recording(path, host: str = "127.0.0.1", port: int = 8765, token: str | None = None) -> tuple[LiveServer, Any]:

@@ -3,8 +3,10 @@
 Server -> page, over one websocket:
 
 1. one text message, JSON: ``{"type": "hello", "mode": "live"|"view", "header": <run header>,
+   "scene": <the header's geometry checked and normalised (render's ``scene_info``), or null>,
    "fields": [colourable field names], "controls": {name: length}, "limits": {name: max norm},
-   "frames": <recorded frames, view mode>}``;
+   "control": {name: current values}, "sliders": [the kind's sliders, ``Kind.live_controls``],
+   "frames": <recorded frames, view mode>, "paused": bool, "max_message": bytes}``;
 2. then binary frames, each: a 48-byte little-endian header (:data:`HEAD`: magic ``CPSL``,
    version, flags, frame index, step, time, particle count, dimension, JSON length, colour
    bytes per particle), the JSON overlay (diagnostics, the kind's result, rigid poses, the
@@ -14,9 +16,14 @@ Server -> page, over one websocket:
    when the colour byte count is 1.
 
 Page -> server: JSON text, at most :data:`MAX_MESSAGE` bytes: ``{"type": "control", <control
-name>: [numbers], ...}``, ``{"type": "pause"}``, ``{"type": "resume"}``, ``{"type": "color",
-"field": name|null}`` and, for a recorded run, ``{"type": "seek", "frame": i}``.
-:func:`parse_message` checks one and raises :class:`MessageError` naming what is wrong.
+name>: [numbers], ...}`` (one or more of the run's controls; a control not named keeps its
+value), ``{"type": "pause"}``, ``{"type": "resume"}``, ``{"type": "color", "field":
+name|null}``, ``{"type": "ready"}`` (the page drew a frame: flow control, at most
+``server.CREDITS`` frames are sent ahead of the page's drawing once it says it) and, for a
+recorded run, ``{"type": "seek", "frame": i}``. :func:`parse_message`
+checks one (size, JSON, type, exactly the keys the type takes, a control's length, finite
+numbers, its norm bound and its sliders' range) and raises :class:`MessageError` naming what is
+wrong.
 """
 from __future__ import annotations
 
@@ -168,11 +175,27 @@ def decode_frame(data: bytes) -> dict[str, Any]:
             "version": version}
 
 
+def slider_ranges(sliders: list[dict[str, Any]] | None) -> dict[str, list[tuple[float, float]]]:
+    """The range of each control component a slider sets (control = scale * value + offset
+    over the slider's [min, max]); components no slider sets are unbounded here."""
+    out: dict[str, list[tuple[float, float]]] = {}
+    for sl in sliders or []:
+        name, i = str(sl["control"]), int(sl.get("index", 0))
+        a, b = (float(sl.get("scale", 1.0)) * float(sl[k]) + float(sl.get("offset", 0.0)) for k in ("min", "max"))
+        rng = out.setdefault(name, [])
+        while len(rng) <= i:
+            rng.append((-math.inf, math.inf))
+        rng[i] = (min(a, b), max(a, b))
+    return out
+
+
 def parse_message(raw: str | bytes, controls: dict[str, int], fields: list[str] | None = None,
-                  frames: int | None = None, limits: dict[str, float] | None = None) -> dict[str, Any]:
+                  frames: int | None = None, limits: dict[str, float] | None = None,
+                  ranges: dict[str, list[tuple[float, float]]] | None = None) -> dict[str, Any]:
     """One message from the page, checked: size, JSON object, known type, exactly the keys
-    the type takes, finite numbers of the control's length within its bound. Returns the
-    message; raises :class:`MessageError`."""
+    the type takes, finite numbers of the control's length within its norm bound (``limits``)
+    and its components' ranges (``ranges``, :func:`slider_ranges`). Returns the message (a
+    control message: only the controls it names); raises :class:`MessageError`."""
     if isinstance(raw, (bytes, bytearray, memoryview)):
         raise MessageError("binary message (only JSON text is accepted)")
     if len(raw) > MAX_MESSAGE or len(raw.encode("utf-8", "surrogatepass")) > MAX_MESSAGE:
@@ -193,14 +216,18 @@ def parse_message(raw: str | bytes, controls: dict[str, int], fields: list[str] 
         if extra:
             raise MessageError(f"{kind} message: unknown key {extra[0][:40]!r}")
 
-    if kind in ("pause", "resume"):
+    if kind in ("pause", "resume", "ready"):
         keys(set())
         return {"type": kind}
     if kind == "control":
         keys(set(controls))
+        if len(msg) == 1:
+            raise MessageError("control message names no control")
         out: dict[str, Any] = {"type": "control"}
         for name, length in controls.items():
-            value = msg.get(name, [0.0] * length)
+            if name not in msg:
+                continue
+            value = msg[name]
             if (not isinstance(value, list) or len(value) != length
                     or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)):
                 raise MessageError(f"control {name!r} must be a list of {length} numbers")
@@ -210,11 +237,16 @@ def parse_message(raw: str | bytes, controls: dict[str, int], fields: list[str] 
             bound = float(limits.get(name, DEFAULT_LIMIT))
             if math.sqrt(sum(x * x for x in vec)) > bound:
                 raise MessageError(f"control {name!r} has norm above {bound:g}")
+            for i, (x, (lo, hi)) in enumerate(zip(vec, (ranges or {}).get(name, []))):
+                if not lo - 1e-9 * abs(lo) <= x <= hi + 1e-9 * abs(hi):
+                    raise MessageError(f"control {name!r}[{i}] = {x:.6g} is outside [{lo:.6g}, {hi:.6g}]")
             out[name] = vec
         return out
     if kind == "color":
         keys({"field"})
-        field = msg.get("field")
+        if "field" not in msg:
+            raise MessageError("color message without its field (a name, or null for none)")
+        field = msg["field"]
         if field is not None and (not isinstance(field, str) or field not in (fields or [])):
             raise MessageError(f"color: unknown field {str(field)[:40]!r}")
         return {"type": "color", "field": field}

@@ -27,6 +27,7 @@ CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' 
        "connect-src 'self'; frame-ancestors 'none'")
 LOCAL_NAMES = {"localhost", "127.0.0.1", "::1"}
 TRANSPORT_LIMIT = 64 * 1024  # a websocket message over this closes the connection
+CREDITS = 2  # frames in flight to a page that acknowledges them (one drawn, one on its way)
 
 
 class ServerError(OSError):
@@ -62,6 +63,10 @@ class _Client:
         self.dirty = True
         self.want: int | None = None
         self.sent = 0
+        # flow control: a page that says "ready" after drawing a frame is sent at most
+        # CREDITS frames it has not drawn yet (None: a client that never says it; the
+        # socket's own back-pressure only)
+        self.credits: int | None = None
 
 
 class LiveServer:
@@ -79,7 +84,8 @@ class LiveServer:
     def __init__(self, header: dict[str, Any], *, mode: str = "live", host: str = "127.0.0.1", port: int = 8765,
                  token: str | None = None, controls: dict[str, int] | None = None,
                  source: Callable[[int], dict] | None = None, frames: int | None = None,
-                 log: Callable[[str], None] | None = None):
+                 log: Callable[[str], None] | None = None, control: dict[str, list[float]] | None = None,
+                 sliders: list[dict[str, Any]] | None = None):
         if not is_local(host) and not token:
             raise ValueError(f"a server on {host} (not this machine only) needs a token")
         self.header = header
@@ -88,9 +94,14 @@ class LiveServer:
         self.port = int(port)
         self.token = token
         self.controls = dict(controls or {})
+        # the control the run takes (a control message changes the controls it names)
+        self._current = {k: [float(x) for x in (control or {}).get(k, [0.0] * n)] for k, n in self.controls.items()}
+        self.sliders = [dict(sl) for sl in (sliders or []) if sl.get("control") in self.controls]
+        self.ranges = protocol.slider_ranges(self.sliders)
         self.source = source
         self.frames = frames
         self.log = log if log is not None else (lambda line: print(f"corpuscle: live: {line}", file=sys.stderr, flush=True))
+        self.scene = _scene_geometry(header, self.log)
         self.rejected = 0           # messages rejected (tests read it)
         self.accepted = 0
         self.published = 0
@@ -304,9 +315,12 @@ class LiveServer:
             await self._first_frame.wait()
         fields = self._fields()
         client = _Client(ws, peer, "density" if "density" in fields else (fields[0] if fields else None))
-        hello = {"type": "hello", "mode": self.mode, "header": self.header, "fields": fields,
+        with self._lock:
+            current = {k: list(v) for k, v in self._current.items()}
+        hello = {"type": "hello", "mode": self.mode, "header": self.header, "scene": self.scene, "fields": fields,
                  "controls": self.controls, "limits": {k: protocol.LIMITS.get(k, protocol.DEFAULT_LIMIT)
                                                         for k in self.controls},
+                 "control": current, "sliders": self.sliders,
                  "frames": self.frames, "paused": self.paused, "max_message": protocol.MAX_MESSAGE}
         await ws.send_str(protocol.dumps(hello))
         self._clients.add(client)
@@ -330,17 +344,19 @@ class LiveServer:
     def _handle(self, client: _Client, data: str) -> None:
         try:
             msg = protocol.parse_message(data, self.controls, fields=self._fields(),
-                                         frames=self.frames if self.mode == "view" else None)
+                                         frames=self.frames if self.mode == "view" else None, ranges=self.ranges)
             if self.mode == "view" and msg["type"] in ("control", "pause", "resume"):
                 raise protocol.MessageError(f"{msg['type']}: a recorded run cannot be steered")
         except protocol.MessageError as exc:
             self._reject(client.peer, str(exc))
             return
-        self.accepted += 1
         kind = msg["type"]
+        if kind != "ready":  # (flow control is not counted: tests count what the page asked for)
+            self.accepted += 1
         if kind == "control":
             with self._lock:
-                self._control = {k: v for k, v in msg.items() if k != "type"}
+                self._current.update({k: v for k, v in msg.items() if k != "type"})
+                self._control = {k: list(v) for k, v in self._current.items()}
         elif kind == "pause":
             self._paused.set()
         elif kind == "resume":
@@ -352,6 +368,9 @@ class LiveServer:
         elif kind == "seek":
             client.want = msg["frame"]
             client.event.set()
+        elif kind == "ready":  # the page drew a frame: it may have another
+            client.credits = min(CREDITS, (client.credits if client.credits is not None else CREDITS - 1) + 1)
+            client.event.set()
 
     async def _sender(self, client: _Client) -> None:
         loop = asyncio.get_running_loop()
@@ -360,6 +379,8 @@ class LiveServer:
             while not client.ws.closed:
                 await client.event.wait()
                 client.event.clear()
+                if client.credits is not None and client.credits <= 0:
+                    continue  # the page has not drawn what it was sent: the next "ready" wakes this
                 if self.mode == "live":
                     with self._lock:
                         latest = self._latest
@@ -380,6 +401,8 @@ class LiveServer:
                 await client.ws.send_bytes(data)  # waits while this client's socket is full
                 client.sent_seq = seq
                 client.sent += 1
+                if client.credits is not None:
+                    client.credits -= 1
         except (asyncio.CancelledError, ConnectionError):
             pass
         except Exception as exc:  # noqa: BLE001 - one client's failure never reaches the run
@@ -411,6 +434,19 @@ def encode(frame: dict, header: dict, color: str | None) -> bytes:
                             "unit": (header.get("units") or {}).get(color, "")}
     return protocol.encode_frame(frame.get("index", 0), frame.get("step", 0), frame.get("time", 0.0), pos,
                                  lo, hi, overlay, col)
+
+
+def _scene_geometry(header: dict, log: Callable[[str], None]) -> dict | None:
+    """The header's scene description checked and normalised for the page (render's
+    ``scene_info``: numbers where numbers belong, a 2-D box obstacle's corners), or None
+    (logged) where it is malformed: the page then draws the particles only."""
+    from .._viz_common import HeaderError, scene_info
+
+    try:
+        return scene_info(header)
+    except HeaderError as exc:
+        log(f"the run header's scene is not drawn: {exc}")
+        return None
 
 
 def _static_bytes(name: str) -> bytes:

@@ -81,6 +81,7 @@ constexpr int kBadParticles = 1;  // a particle position or velocity went non-fi
 // the input of the next step
 struct Control {
   float speed_scale;  // the re-entering free stream's speed is U (1 + speed_scale)
+  float pitch;        // degrees added to the angle of attack (nose up), about the quarter chord
 };
 
 // the per-scene record

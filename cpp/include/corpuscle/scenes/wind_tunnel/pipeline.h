@@ -105,7 +105,7 @@ class Pipeline {
     Arrays s = arrays(nxt, cur);
     CellGridView<D> view = grid_.view(s.pos);
     // 2. contacts by gather
-    ex_.for_each(n, ForceStage{md, g, s, view});
+    ex_.for_each(n, ForceStage{md, g, u_, s, view});
     ex_.mark(1);
     if (integrate) {
       // 3. the reductions and the per-scene update

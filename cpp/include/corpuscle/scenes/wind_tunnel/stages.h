@@ -53,10 +53,38 @@ struct ReorderStage {
   }
 };
 
+// the airfoil as the control pitches it: the built polygon turned nose up by u.pitch degrees
+// about the quarter chord (clockwise for a flow along +x, as airfoils.place turns it). The
+// contact is found in the polygon's built frame, x_b = q + R (x - q), R the counter-clockwise
+// rotation by the pitch, and its force and point turned back; at zero pitch every map is the
+// identity (no rounding: an unpitched run is bitwise what it was before the control existed)
+struct AirfoilFrame {
+  bool pitched;
+  float c, s;  // cos, sin of the pitch
+  Vec2 q;      // the pivot (the quarter chord)
+  CPS_HD CPS_INLINE Vec2 dir_to_body(const Vec2& d) const {
+    return pitched ? Vec2{{c * d[0] - s * d[1], s * d[0] + c * d[1]}} : d;
+  }
+  CPS_HD CPS_INLINE Vec2 dir_to_world(const Vec2& d) const {
+    return pitched ? Vec2{{c * d[0] + s * d[1], -s * d[0] + c * d[1]}} : d;
+  }
+  CPS_HD CPS_INLINE Vec2 to_body(const Vec2& x) const { return pitched ? q + dir_to_body(x - q) : x; }
+  CPS_HD CPS_INLINE Vec2 to_world(const Vec2& x) const { return pitched ? q + dir_to_world(x - q) : x; }
+};
+CPS_HD CPS_INLINE AirfoilFrame airfoil_frame(const Model& m, const Control& u) {
+  AirfoilFrame f;
+  f.pitched = u.pitch != 0.0f;
+  const float a = u.pitch * (kPi / 180.0f);
+  f.c = f.pitched ? fcos(a) : 1.0f;
+  f.s = f.pitched ? fsin(a) : 0.0f;
+  f.q = m.quarter_chord;
+  return f;
+}
+
 // the contact force on particle i from the two walls and the airfoil; adds the reaction on
 // the airfoil (force, moment about the quarter chord) to s
-CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const Vec2& x, const Vec2& v, float& pressure, int& contacts,
-                                       StepSums& s) {
+CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const AirfoilFrame& af, const Vec2& x, const Vec2& v,
+                                       float& pressure, int& contacts, StepSums& s) {
   Vec2 F = Vec2::zero();
   Vec2 f;
   float mag;
@@ -73,15 +101,17 @@ CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const Vec2& x, const Vec2
     pressure += mag;
     contacts += 1;
   }
-  if (m.n_edges > 0 && box_distance2(m.bbox, x) < m.radius * m.radius) {
+  const Vec2 xb = af.to_body(x);
+  if (m.n_edges > 0 && box_distance2(m.bbox, xb) < m.radius * m.radius) {
     PolygonHit hit;
-    if (polygon_contact_force(m.wing, m.airfoil(), x, v, m.radius, f, mag, hit)) {
+    if (polygon_contact_force(m.wing, m.airfoil(), xb, af.dir_to_body(v), m.radius, f, mag, hit)) {
+      f = af.dir_to_world(f);
       F += f;
       pressure += mag;
       contacts += 1;
       // the airfoil gets -f, applied at the contact point
       Vec2 fa = -f;
-      Vec2 r = hit.closest - m.quarter_chord;
+      Vec2 r = af.to_world(hit.closest) - m.quarter_chord;
       s.force += fa;
       s.moment += r[0] * fa[1] - r[1] * fa[0];
       s.contacts += 1;
@@ -96,6 +126,7 @@ CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const Vec2& x, const Vec2
 struct ForceStage {
   const Model* model;
   const Scene* g;
+  const Control* ctl;
   Arrays s;
   CellGridView<D> grid;
   CPS_HD void operator()(int i) const {
@@ -120,7 +151,7 @@ struct ForceStage {
       }
     });
     StepSums it = StepSums::identity();
-    F += boundary_forces(m, x, v, pressure, contacts, it);
+    F += boundary_forces(m, airfoil_frame(m, *ctl), x, v, pressure, contacts, it);
     it.total_force = F;
     it.vmax2 = norm2(v);
     it.ke = 0.5f * m.mass * it.vmax2;
@@ -217,7 +248,7 @@ CPS_HD CPS_INLINE void reenter(const Model& m, const Control& u, int id, long lo
 // put back on the surface (a twentieth of a radius outside, along the signed-distance
 // normal) with its normal velocity reflected; a centre past a wall is mirrored back. These
 // are counted (pushouts): with the contact stiffness resolving the contacts, there are none
-CPS_HD CPS_INLINE bool keep_out(const Model& m, Vec2& x, Vec2& v) {
+CPS_HD CPS_INLINE bool keep_out(const Model& m, const AirfoilFrame& af, Vec2& x, Vec2& v) {
   bool moved = false;
   if (x[1] < m.lo[1]) {
     x[1] = fmin2(2.0f * m.lo[1] - x[1], m.hi[1]);
@@ -229,16 +260,20 @@ CPS_HD CPS_INLINE bool keep_out(const Model& m, Vec2& x, Vec2& v) {
     v[1] = v[1] > 0.0f ? -v[1] : v[1];
     moved = true;
   }
-  if (m.n_edges > 0 && box_distance2(m.bbox, x) == 0.0f && polygon_contains(m.airfoil(), x)) {
-    PolygonHit hit = polygon_sdf(m.airfoil(), x);
+  // (in the airfoil's built frame: af)
+  Vec2 xb = af.to_body(x);
+  if (m.n_edges > 0 && box_distance2(m.bbox, xb) == 0.0f && polygon_contains(m.airfoil(), xb)) {
+    PolygonHit hit = polygon_sdf(m.airfoil(), xb);
     float step = 0.05f * m.radius;
     for (int k = 0; k < 8; ++k) {
-      x = hit.closest + hit.normal * step;
-      if (!polygon_contains(m.airfoil(), x)) break;
+      xb = hit.closest + hit.normal * step;
+      if (!polygon_contains(m.airfoil(), xb)) break;
       step *= 2.0f;
     }
-    float vn = dot(v, hit.normal);
-    if (vn < 0.0f) v -= hit.normal * (2.0f * vn);
+    x = af.to_world(xb);
+    const Vec2 normal = af.dir_to_world(hit.normal);
+    float vn = dot(v, normal);
+    if (vn < 0.0f) v -= normal * (2.0f * vn);
     moved = true;
   }
   return moved;
@@ -269,7 +304,7 @@ struct IntegrateStage {
       reenter(m, *ctl, s.id[i], g->clock.step, dt, x, v);
       add_count(&g->recycled, 1);
     }
-    if (keep_out(m, x, v)) add_count(&g->pushouts, 1);
+    if (keep_out(m, airfoil_frame(m, *ctl), x, v)) add_count(&g->pushouts, 1);
     if (!finite(x[0] + x[1] + v[0] + v[1])) raise_first(&g->clock.bad, kBadParticles);
     s.pos[i] = x;
     s.vel[i] = v;

@@ -36,4 +36,6 @@
   X(blocks_moment, double, kMaxBlocks, blk_moment, true)
 
 // X(name, C type, count, member of Control)
-#define CPS_WT_CONTROLS(X) X(speed_scale, float, 1, speed_scale)
+#define CPS_WT_CONTROLS(X)              \
+  X(speed_scale, float, 1, speed_scale) \
+  X(pitch, float, 1, pitch)
