@@ -324,9 +324,10 @@ def test_cuda_pitched_airfoil_matches_cpu():
     sc, sg = cpu.evaluate(), cuda.evaluate()
     assert sc["airfoil_contacts"] >= 10 and sg["airfoil_contacts"] == sc["airfoil_contacts"]
 
-    def by_id(sim, name):
-        out = np.empty_like(np.asarray(sim.field(name)))
-        out[np.asarray(sim.field("id"))] = np.asarray(sim.field(name))
+    def by_id(sim, name):  # host copies (a CUDA field view is device memory)
+        values = sim.field(name, copy=True)
+        out = np.empty_like(values)
+        out[sim.field("id", copy=True)] = values
         return out
 
     fc, fg = by_id(cpu, "force"), by_id(cuda, "force")
