@@ -113,7 +113,7 @@ class Batch:
     @classmethod
     def from_scene(cls, scene="magic8ball", n: int = 1, backend: str = "auto",
                    overrides: dict[str, Any] | None = None, neighbors: str | None = None, device: int = 0,
-                   settle: float = 0.5, randomize: bool = True, placement: str = "rotated",
+                   settle: float = 1.0, randomize: bool = True, placement: str = "rotated",
                    **kwargs) -> "Batch":
         """n scenes of one scene file (a built-in name, a TOML path or a Scene), with
         overrides as :meth:`corpuscle.Simulation.from_scene` takes them (dotted keys or

@@ -12,6 +12,8 @@
 #include <algorithm>
 #include <cstring>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "corpuscle/core/error.h"
@@ -19,6 +21,13 @@
 #include "corpuscle/sim/sim.h"
 
 namespace cps {
+
+// whether a kind's pipeline has a batch's reset cache, restore and observations
+// (cache_scenes, restore_scenes, observe; the CUDA build is C++17: no concepts)
+template <class P, class = void>
+struct has_batch_api : std::false_type {};
+template <class P>
+struct has_batch_api<P, std::void_t<decltype(std::declval<P&>().cache_scenes())>> : std::true_type {};
 
 template <class Exec, class P>
 class SimImpl final : public Sim {
@@ -262,7 +271,7 @@ class SimImpl final : public Sim {
   }
 
   void cache_scenes() override {
-    if constexpr (requires(P& p) { p.cache_scenes(); }) {
+    if constexpr (has_batch_api<P>::value) {
       p_.cache_scenes();
       ex_.synchronize();
     } else {
@@ -271,7 +280,7 @@ class SimImpl final : public Sim {
   }
 
   void restore_scenes(const int* scenes_, int k, const float* turn, const float* sym) override {
-    if constexpr (requires(P& p) { p.restore_scenes(scenes_, k, turn, sym); }) {
+    if constexpr (has_batch_api<P>::value) {
       std::vector<char> seen(size_t(scenes()), 0);
       for (int q = 0; q < k; ++q) {
         check_scene(scenes_[q]);
@@ -287,7 +296,7 @@ class SimImpl final : public Sim {
   }
 
   std::vector<SceneArray> observe() override {
-    if constexpr (requires(P& p) { p.observe(); }) {
+    if constexpr (has_batch_api<P>::value) {
       auto out = p_.observe();
       ex_.synchronize();  // the arrays are read by other streams and libraries
       return out;
