@@ -335,13 +335,20 @@ void bind_sim(nb::module_& m) {
              s.sim->restore_scenes(scenes.data(), int(k), turn.data(), sym.data());
            }, nb::arg("scenes"), nb::arg("turn"), nb::arg("sym"),
            "Restore distinct scenes from the cache, each turned by a quaternion and its die by another.")
-      .def("observe", [](nb::handle self) {
+      .def("observe", [](nb::handle self, bool copy) {
              PySim& s = nb::cast<PySim&>(self);
              const int B = s.sim->scenes();
              nb::dict d;
              for (const SceneArray& a : s.sim->observe()) {
                size_t shape[2] = {size_t(B), size_t(a.cols)};
                const int ndim = a.cols > 1 ? 2 : 1;
+               if (copy) {  // host copies (NumPy arrays of their own)
+                 std::vector<unsigned char> bytes(dtype_size(a.dtype) * size_t(a.cols) * size_t(B));
+                 s.sim->copy_to_host(bytes.data(), a.data, bytes.size());
+                 FieldInfo f{a.name, "scene", a.dtype, a.cols, false, false};
+                 d[a.name.c_str()] = owned(std::move(bytes), f, B);
+                 continue;
+               }
                // host memory: NumPy arrays; device memory: arrays exposing __dlpack__ (no copies)
                if (!s.sim->on_device())
                  d[a.name.c_str()] = nb::cast(nb::ndarray<nb::numpy>(a.data, ndim, shape, self, nullptr, dl(a.dtype)));
@@ -350,8 +357,9 @@ void bind_sim(nb::module_& m) {
                                                                          nb::device::cuda::value, s.sim->device()));
              }
              return d;
-           },
-           "Per-scene observations as zero-copy arrays (NumPy on the CPU, DLPack on CUDA); overwritten by the next call.")
+           }, nb::arg("copy") = false,
+           "Per-scene observations as zero-copy arrays (NumPy on the CPU, DLPack on CUDA; overwritten by the next "
+           "call), or host copies (copy=True).")
       .def("set_scalar", [](PySim& s, const std::string& name, nb::handle value, int scene) {
              for (const ScalarInfo& x : s.sim->scalars())
                if (x.name == name) {

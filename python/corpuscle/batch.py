@@ -278,13 +278,20 @@ class Batch:
         by the scene that took the most (a scene past its end time or unsound takes none)."""
         return int(self.core.step(_count("steps", k)))
 
-    def advance(self, duration: float, max_steps: int = 10**7) -> int:
-        """Advance every scene by `duration` seconds of simulated time (each lands exactly
-        on its time + duration, then waits for the others); returns the steps of the
-        scene that took the most."""
-        if not isinstance(duration, numbers.Real) or isinstance(duration, bool) or not (0 < duration < 1e6):
-            raise ValueError(f"duration must be a positive number of seconds, got {duration!r}")
-        self.core.set_end_times(np.full(self.n_scenes, float(duration)), True)
+    def advance(self, duration, max_steps: int = 10**7) -> int:
+        """Advance every scene by `duration` seconds of simulated time (one number, or one
+        per scene; 0 holds a scene still): each lands exactly on its time + duration, then
+        waits for the others. Returns the steps of the scene that took the most."""
+        if isinstance(duration, numbers.Real) and not isinstance(duration, bool):
+            if not (0 < duration < 1e6):
+                raise ValueError(f"duration must be a positive number of seconds, got {duration!r}")
+            d = np.full(self.n_scenes, float(duration))
+        else:
+            d = np.asarray(duration, dtype=np.float64) if not isinstance(duration, bool) else np.zeros(0)
+            if d.shape != (self.n_scenes,) or not np.all((d >= 0) & (d < 1e6)):
+                raise ValueError(f"duration must be a positive number of seconds or {self.n_scenes} numbers >= 0, "
+                                 f"got {duration!r}")
+        self.core.set_end_times(np.ascontiguousarray(d), True)
         taken = int(self.core.step(_count("max_steps", max_steps, minimum=1)))
         self.core.set_end_time(math.inf)
         return taken
@@ -364,16 +371,13 @@ class Batch:
         ``done`` and ``bad`` (B,; the clock's flags). One small kernel writes them into
         buffers of their own, handed out without copies (valid until the next call):
         NumPy on the CPU; on CUDA, arrays exposing ``__dlpack__``. ``like`` converts:
-        ``"torch"``, ``"cupy"``, ``"jax"`` (zero-copy through DLPack) or ``"numpy"`` (a
-        host copy on CUDA)."""
+        ``"torch"``, ``"cupy"``, ``"jax"`` (zero-copy through DLPack) or ``"numpy"`` (host
+        copies of their own, on every backend)."""
+        if like == "numpy":
+            return dict(self.core.observe(True))
         obs = dict(self.core.observe())
         if like is None:
             return obs
-        if like == "numpy":
-            if not self.core.on_device:
-                return obs
-            import cupy  # noqa: F401 - the DLPack consumer for device arrays
-            return {k: cupy.asnumpy(cupy.from_dlpack(v)) for k, v in obs.items()}
         if like == "torch":
             import torch
             return {k: torch.from_dlpack(v) for k, v in obs.items()}

@@ -90,6 +90,8 @@ class Sim {
   virtual void cache_scenes() = 0;
   virtual void restore_scenes(const int* scenes, int k, const float* turn, const float* sym) = 0;
   virtual std::vector<SceneArray> observe() = 0;
+  // copy bytes of the backend's memory (an observe() array) to the host
+  virtual void copy_to_host(void* dst, const void* src, size_t bytes) = 0;
 
   // seconds for n steps on the backend's clock after a synchronise; per-stage ms per step
   virtual double bench(long long n) = 0;

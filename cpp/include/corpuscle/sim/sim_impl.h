@@ -306,6 +306,11 @@ class SimImpl final : public Sim {
     }
   }
 
+  void copy_to_host(void* dst, const void* src, size_t bytes) override {
+    ex_.synchronize();
+    ex_.to_host(dst, src, bytes);
+  }
+
   double bench(long long n) override {
     step(1, {});  // capture / warm the step outside the timing
     ex_.synchronize();
