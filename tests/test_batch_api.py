@@ -294,3 +294,24 @@ def test_cuda_observations_are_zero_copy_through_dlpack():
     cupy = pytest.importorskip("cupy")
     c = g.observations(like="cupy")
     assert c["time"].data.ptr == ptr
+
+
+def test_the_core_checks_per_scene_parameters():
+    from corpuscle import _core
+
+    b = batch(2)
+    params = dict(b.params)
+    arrays = {"position": b.field("position", copy=True), "velocity": b.field("velocity", copy=True)}
+    for scenes, msg in (([{"n_fluid": 0}, {}], r"scenes\[0\]\.n_fluid must be in 1\.\.260"),
+                        ([{}, {"n_fluid": 261}], r"scenes\[1\]\.n_fluid must be in 1\.\.260"),
+                        ([{}, {"viscosity": -1.0}], r"scenes\[1\]: mass, stiffness"),
+                        ([{}], "scenes needs 2 tables")):
+        with pytest.raises(ValueError, match=msg):
+            _core.Simulation("magic8ball", "serial", "lists", {**params, "scenes": scenes}, arrays)
+    one = {**params, "n_scenes": 1, "scenes": [{"n_fluid": 100}], "die_initial_scenes": params["die_initial_scenes"][:1]}
+    with pytest.raises(ValueError, match="a single scene has n_fluid particles"):
+        _core.Simulation("magic8ball", "serial", "lists", one, {k: v[:N] for k, v in arrays.items()})
+    # the wind tunnel has no reset cache
+    wt = Simulation.from_scene("wind-tunnel", backend="serial", particles=2000)
+    with pytest.raises(ValueError, match="wind-tunnel: this kind has no reset cache"):
+        wt.core.cache_scenes()

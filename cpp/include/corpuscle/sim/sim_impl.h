@@ -275,7 +275,7 @@ class SimImpl final : public Sim {
       p_.cache_scenes();
       ex_.synchronize();
     } else {
-      unsupported("a reset cache");
+      unsupported("reset cache");
     }
   }
 
@@ -291,7 +291,7 @@ class SimImpl final : public Sim {
       ex_.synchronize();
       rec_valid_ = false;
     } else {
-      unsupported("a reset cache");
+      unsupported("reset cache");
     }
   }
 
