@@ -9,8 +9,8 @@ start. The policy maps the die's state to a shake each control period:
 
 where n is the target face's outward normal in the container frame (the die's orientation
 applied to the face's body normal), e_z the window's direction and omega the die's angular
-velocity: 3 x 7 weights for the shell torque and 3 x 7 for the container acceleration (42
-numbers). Why feedback and not an open-loop shake schedule: the cube is symmetric and the
+velocity: 3 x 7 weights for the shell torque (``--policy torque``, the default: 21 numbers,
+no linear shaking) or also 3 x 7 for the container acceleration (``--policy full``: 42). Why feedback and not an open-loop shake schedule: the cube is symmetric and the
 start is uniform over its rotations, so a schedule that ignores the die gives every face
 the same 1/6 chance, however it is chosen.
 
@@ -78,6 +78,9 @@ def main(argv=None) -> int:
     p.add_argument("--max-acceleration", type=float, default=10.0, help="acceleration at |action| = 1, m/s^2 (default: 10)")
     p.add_argument("--dt-max", type=float, default=3e-3, help="largest time step, s (default: 3e-3; coarse fluid allows it)")
     p.add_argument("--settle", type=float, default=0.5, help="settling before the cache, s (default: 0.5)")
+    p.add_argument("--policy", choices=("torque", "full"), default="torque",
+                   help="torque: W sets the shell torque (21 weights); full: torque and acceleration (42)")
+    p.add_argument("--init-std", type=float, default=1.0, help="the sampling distribution's first spread (default: 1)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--plot", default="rig_the_8ball.png", help="the plot (PNG); '' for none")
     p.add_argument("--json", default="", help="also write the results as JSON")
@@ -100,8 +103,14 @@ def main(argv=None) -> int:
           f"{time.perf_counter() - t0:.1f} s); target face {a.face}", flush=True)
     normal = np.asarray(DIE_FACES[a.face], dtype=np.float64)
     rng = np.random.default_rng(a.seed)
-    dim = (6, 7)
-    mean, std = np.zeros(dim), np.ones(dim)
+    dim = (6, 7) if a.policy == "full" else (3, 7)
+    mean, std = np.zeros(dim), np.full(dim, a.init_std)
+
+    def act(Wx, f):
+        # (B, rows) of the policy; torque-only policies leave the acceleration at zero
+        out = np.clip(np.einsum("bij,bj->bi", Wx, f) if Wx.ndim == 3 else f @ Wx.T, -1, 1)
+        return out if a.policy == "full" else np.concatenate([np.zeros_like(out), out], axis=1)
+
     n_elite = max(1, int(round(a.elite * a.population)))
     history = []
     seed = a.seed
@@ -110,8 +119,7 @@ def main(argv=None) -> int:
         Wscene = np.repeat(W, a.scenes, axis=0)  # scene s runs policy s // scenes
         t = time.perf_counter()
         seed += 1
-        score, success, trunc = episode(env, lambda obs, f: np.clip(np.einsum("bij,bj->bi", Wscene, f), -1, 1),
-                                        normal, seed)
+        score, success, trunc = episode(env, lambda obs, f: act(Wscene, f), normal, seed)
         per = score.reshape(a.population, a.scenes).mean(axis=1)
         elite = np.argsort(per)[-n_elite:]
         mean, std = W[elite].mean(axis=0), W[elite].std(axis=0) + 0.05
@@ -124,7 +132,7 @@ def main(argv=None) -> int:
 
     # the learned policy against random shaking and no shaking, one episode on every scene
     results = {}
-    policies = {"learned (CEM mean)": lambda obs, f: np.clip(f @ mean.T, -1, 1),
+    policies = {"learned (CEM mean)": lambda obs, f: act(mean, f),
                 "random shaking": lambda obs, f: rng.uniform(-1, 1, (len(obs), 6)),
                 "no shaking": lambda obs, f: np.zeros((len(obs), 6))}
     for name, pol in policies.items():
@@ -140,7 +148,7 @@ def main(argv=None) -> int:
     total = time.perf_counter() - t0
     print(f"total {total:.1f} s (chance: 1/6 = 0.167)")
     out = {"args": vars(a), "history": history, "results": results, "seconds": total,
-           "backend": env.batch.backend, "scenes": B}
+           "backend": env.batch.backend, "scenes": B, "policy_mean": mean.tolist()}
     if a.json:
         with open(a.json, "w", encoding="utf-8") as f:
             json.dump(out, f, indent=2)

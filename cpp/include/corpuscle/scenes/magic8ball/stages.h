@@ -277,7 +277,7 @@ struct DensityStage {
     const int s = i / m.n_fluid;
     Scene* gs = g + s;
     if (halted(gs) || i - s * m.n_fluid >= gs->phys.n_active) return;
-    const ScenePhysics& P = gs->phys;
+    const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
     const bool rebuild = rebuilding(gs);
@@ -322,7 +322,7 @@ struct ForceStage {
     const Scene* gs = g + sc;
     // the reduction of a step not taken is discarded; inactive slots are not reduced
     if (halted(gs) || i - sc * m.n_fluid >= gs->phys.n_active) return;
-    const ScenePhysics& P = gs->phys;
+    const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
     ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.prs, i, total_fluid(m));
     Vec3 x = a.pos[i];
     PairWalk<Index>::forces(m, gs, a, scene_grid(m, grid, sc), i, x, L, fv);
