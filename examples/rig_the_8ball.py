@@ -9,10 +9,11 @@ start. The policy maps the die's state to a shake each control period:
 
 where n is the target face's outward normal in the container frame (the die's orientation
 applied to the face's body normal), e_z the window's direction and omega the die's angular
-velocity: 3 x 7 weights for the shell torque (``--policy torque``, the default: 21 numbers,
-no linear shaking) or also 3 x 7 for the container acceleration (``--policy full``: 42). Why feedback and not an open-loop shake schedule: the cube is symmetric and the
-start is uniform over its rotations, so a schedule that ignores the die gives every face
-the same 1/6 chance, however it is chosen.
+velocity: 3 x 7 weights for the shell torque and 3 x 7 for the container acceleration
+(``--policy full``, the default: 42 numbers), or the torque alone (``--policy torque``: 21).
+Why feedback and not an open-loop shake schedule: the cube is symmetric and the start is
+uniform over its rotations, so a schedule that ignores the die gives every face the same 1/6
+chance, however it is chosen.
 
 Each CEM iteration samples `population` weight matrices from a Gaussian, runs each on
 `scenes` 8-balls at once (one batch of population x scenes scenes), scores it by the mean
@@ -78,8 +79,9 @@ def main(argv=None) -> int:
     p.add_argument("--max-acceleration", type=float, default=10.0, help="acceleration at |action| = 1, m/s^2 (default: 10)")
     p.add_argument("--dt-max", type=float, default=3e-3, help="largest time step, s (default: 3e-3; coarse fluid allows it)")
     p.add_argument("--settle", type=float, default=0.5, help="settling before the cache, s (default: 0.5)")
-    p.add_argument("--policy", choices=("torque", "full"), default="torque",
-                   help="torque: W sets the shell torque (21 weights); full: torque and acceleration (42)")
+    p.add_argument("--policy", choices=("torque", "full"), default="full",
+                   help="full: W sets the shell torque and the acceleration (42 weights, the default); torque: "
+                        "the torque alone (21)")
     p.add_argument("--init-std", type=float, default=1.0, help="the sampling distribution's first spread (default: 1)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--plot", default="rig_the_8ball.png", help="the plot (PNG); '' for none")

@@ -156,7 +156,7 @@ class Batch:
         if seeds is None:
             seeds = int(v["run.seed"]) + np.arange(n, dtype=np.int64)
         if seeds.dtype.kind not in "iu" or np.any(seeds < 0):
-            raise ValueError("run.seed must be non-negative integers")
+            raise ValueError(f"run.seed must be non-negative integers, got {seeds.tolist()!r}")
         cols = {key: (per[key] if key in per else np.full(n, v[key])) for key in PER_SCENE_KEYS if key != "run.seed"}
         counts = cols["fluid.particles"]
         if counts.dtype.kind not in "iu" and not np.all(counts == np.round(counts)):
