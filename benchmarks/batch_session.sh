@@ -25,15 +25,15 @@ if [ "$part" = bench ]; then
 say gpu tests, batch
 python3 -m pytest -q -m gpu tests/test_batch_api.py tests/test_batch.py 2>&1 | tee "$OUT/gpu_tests.log" | tail -8
 say batch tests on the CPU of the device machine
-python3 -m pytest -q tests/test_batch_api.py tests/test_envs.py 2>&1 | tail -3 | tee -a "$log"
+python3 -m pytest -q -m "not gpu" tests/test_batch_api.py tests/test_envs.py 2>&1 | tail -3 | tee -a "$log"
 say target: 4096 scenes of 1000 particles, and one 3500-particle scene
 corpuscle bench magic8ball --backend cuda --particles 1000 --batch 4096 --steps 200 --repeats 3 --no-progress | tee -a "$log"
 corpuscle bench magic8ball --backend cuda --particles 3500 --batch 1 --steps 2000 --repeats 3 --no-progress | tee -a "$log"
 say sweep over B and particles, reset of 10%
-timeout 300 python3 benchmarks/batch_sweep.py --backend cuda --max-seconds 8 --json "$OUT/batch_sweep.json" | tee -a "$log"
+timeout 240 python3 benchmarks/batch_sweep.py --backend cuda --max-seconds 6 --repeats 2 --json "$OUT/batch_sweep.json" | tee -a "$log"
 fi
 if [ "$part" = learn ]; then
 say learner on the GPU
-timeout 420 python3 examples/rig_the_8ball.py --backend cuda --particles 1000 --population 256 --scenes 16 \
+timeout 400 python3 examples/rig_the_8ball.py --backend cuda --particles 1000 --population 256 --scenes 16 \
   --iterations 10 --dt-max 1.5e-3 --plot "$OUT/rig_gpu.png" --json "$OUT/rig_gpu.json" | tee -a "$log"
 fi

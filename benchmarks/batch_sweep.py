@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--backend", default="cuda")
     p.add_argument("--batches", type=int, nargs="+", default=[1, 16, 64, 256, 1024, 4096, 16384])
-    p.add_argument("--particles", type=int, nargs="+", default=[500, 1000, 3500])
+    p.add_argument("--particles", type=int, nargs="+", default=[1000, 500, 3500])
     p.add_argument("--steps", type=int, default=200, help="steps per timed repeat")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--reset-share", type=float, default=0.1, help="share of the scenes reset (default 0.1)")
@@ -41,6 +41,12 @@ def main(argv=None) -> int:
     p.add_argument("--json", default="")
     a = p.parse_args(argv)
     rows = []
+
+    def save():  # after every row: a run cut short by a timeout keeps what it measured
+        if a.json:
+            with open(a.json, "w", encoding="utf-8") as f:
+                json.dump(rows, f, indent=2)
+
     print(f"{'particles':>9} {'B':>6} {'steps/s':>10} {'scene-steps/s':>14} {'particle-steps/s':>17} "
           f"{'speedup':>8} {'step ms':>8} {'reset ms':>9} {'reset+step ms':>13}", flush=True)
     for n in a.particles:
@@ -58,6 +64,7 @@ def main(argv=None) -> int:
             except MemoryNeedError as exc:
                 row["skipped"] = str(exc)
                 rows.append(row)
+                save()
                 print(f"{n:>9} {B:>6} skipped: {exc}", flush=True)
                 continue
             b.step(10)
@@ -82,12 +89,11 @@ def main(argv=None) -> int:
                         "reset_scenes": k, "reset_seconds": r, "step_after_reset_seconds": ra,
                         "reset_cost_over_step": (r + ra - t) / t})
             rows.append(row)
+            save()
             print(f"{n:>9} {B:>6} {1 / t:>10.1f} {B / t:>14.4g} {B * n / t:>17.4g} {B * t1 / t:>8.1f} "
                   f"{1e3 * t:>8.3f} {1e3 * r:>9.3f} {1e3 * (r + ra):>13.3f}", flush=True)
             del b
-    if a.json:
-        with open(a.json, "w", encoding="utf-8") as f:
-            json.dump(rows, f, indent=2)
+    save()
     return 0
 
 

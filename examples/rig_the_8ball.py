@@ -26,7 +26,7 @@ CPU, small (minutes on two cores):
     python examples/rig_the_8ball.py --backend cpu
 GPU (the lead's run; 4,096 scenes of 1,000 particles):
     python examples/rig_the_8ball.py --backend cuda --particles 1000 --population 256 --scenes 16 \
-        --iterations 20 --dt-max 1.5e-3 --plot rig_gpu.png --json rig_gpu.json
+        --iterations 10 --dt-max 1.5e-3 --plot rig_gpu.png --json rig_gpu.json
 """
 from __future__ import annotations
 

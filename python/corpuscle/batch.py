@@ -281,7 +281,8 @@ class Batch:
     def advance(self, duration, max_steps: int = 10**7) -> int:
         """Advance every scene by `duration` seconds of simulated time (one number, or one
         per scene; 0 holds a scene still): each lands exactly on its time + duration, then
-        waits for the others. Returns the steps of the scene that took the most."""
+        waits for the others. Returns the steps run (of the scene that took the most in each
+        chunk)."""
         if isinstance(duration, numbers.Real) and not isinstance(duration, bool):
             if not (0 < duration < 1e6):
                 raise ValueError(f"duration must be a positive number of seconds, got {duration!r}")
@@ -291,8 +292,24 @@ class Batch:
             if d.shape != (self.n_scenes,) or not np.all((d >= 0) & (d < 1e6)):
                 raise ValueError(f"duration must be a positive number of seconds or {self.n_scenes} numbers >= 0, "
                                  f"got {duration!r}")
+        budget = _count("max_steps", max_steps, minimum=1)
         self.core.set_end_times(np.ascontiguousarray(d), True)
-        taken = int(self.core.step(_count("max_steps", max_steps, minimum=1)))
+        # in chunks of the steps the scenes still need at their last dt: a device checks the
+        # scenes only every 32 steps, and steps launched after the last scene is done are waste
+        taken = 0
+        dt_max = float(self.params["dt_max"])
+        while taken < budget:
+            c = self.core
+            live = (c.scalar_of_scenes("done") == 0) & (c.scalar_of_scenes("bad") == 0)
+            if not live.any():
+                break
+            left = (c.scalar_of_scenes("end_time") - c.scalar_of_scenes("time"))[live]
+            dt = c.scalar_of_scenes("dt")[live].astype(np.float64)
+            need = int(np.ceil(np.max(left / np.where(dt > 0, dt, dt_max)) * (1 + 1e-6)))
+            k = int(c.step(min(max(need, 1), budget - taken)))
+            if k == 0:
+                break
+            taken += k
         self.core.set_end_time(math.inf)
         return taken
 
