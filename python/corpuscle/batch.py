@@ -8,8 +8,8 @@ density, seed) is given as arrays; everything else is shared.
 A batch starts settled: the scenes are placed, stepped for ``settle`` seconds without
 control input, and that state is kept on the device as the **reset cache**. Every scene
 then starts from it with its clock at zero, and :meth:`Batch.reset` restores chosen scenes
-from it — one kernel over their particle slots, so resetting a tenth of a batch costs less
-than one batched step. With ``randomize`` the restored scene is turned by two symmetries
+from it — one small upload and two kernels (their slots, their records), so resetting a tenth
+of a batch costs far less than one batched step. With ``randomize`` the restored scene is turned by two symmetries
 that keep it settled: the whole scene about the direction of gravity (the container is a
 sphere at rest) and the die by one of the rotations that map its cube onto itself (24), so
 every face is equally likely to be up when an episode starts. Without it the cached state
