@@ -118,3 +118,23 @@ def test_info_text(capsys):
             assert gpu_lines[i].startswith(f"GPU {i}") and gpu["name"] in gpu_lines[i]
     else:
         assert len(gpu_lines) == 1 and gpu_lines[0].split()[1] == "none"
+
+
+def test_bench_batches_report_scene_and_particle_steps(tmp_path, capsys):
+    out = tmp_path / "batch.json"
+    rc = main(["bench", "magic8ball", "--particles", "200", "--steps", "3", "--repeats", "2", "--warmup", "1",
+               "--backend", "serial", "--no-progress", "--batch", "1", "3", "--json", str(out)])
+    assert rc == 0
+    rows = json.loads(out.read_text())
+    assert [r["batch"] for r in rows] == [1, 3]
+    for r in rows:
+        assert r["particles"] == 200 * r["batch"]
+        assert r["scene_steps_per_second"] == pytest.approx(r["steps_per_second"] * r["batch"])
+        assert r["particle_steps_per_second"] == pytest.approx(r["steps_per_second"] * r["particles"])
+    text = capsys.readouterr().out
+    assert "scene-steps/s" in text.splitlines()[0] and "batch" in text.splitlines()[0]
+    # bad values: exit code 2 and one line naming the option
+    assert main(["bench", "magic8ball", "--batch", "0", "--backend", "serial"]) == 2
+    assert "--batch must be a positive integer, got 0" in capsys.readouterr().err
+    assert main(["bench", "wind-tunnel", "--batch", "2", "--backend", "serial"]) == 2
+    assert "--batch: batches of scenes are magic8ball scenes" in capsys.readouterr().err

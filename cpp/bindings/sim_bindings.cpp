@@ -306,6 +306,60 @@ void bind_sim(nb::module_& m) {
              throw nb::key_error(("unknown control '" + name + "'").c_str());
            }, nb::arg("name"), nb::arg("values"),
            "Set one control input of every scene: values (scenes, count), float64; no rebuild.")
+      .def("set_controls", [](PySim& s, nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> values) {
+             // every control of every scene from one (scenes, columns) float32 array, in the
+             // control table's order; staged, uploaded once by the next step
+             if (int(values.shape(0)) != s.sim->scenes())
+               throw nb::value_error(("controls must have one row per scene (" + std::to_string(s.sim->scenes()) +
+                                      "), got " + std::to_string(values.shape(0))).c_str());
+             s.sim->set_controls(values.data(), int(values.shape(1)));
+           }, nb::arg("values"),
+           "Set every control of every scene: a (scenes, columns) float32 array in controls() order; no rebuild.")
+      .def("set_end_times", [](PySim& s, nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu> t,
+                               bool relative) {
+             if (int(t.shape(0)) != s.sim->scenes())
+               throw nb::value_error(("end times must be one per scene (" + std::to_string(s.sim->scenes()) +
+                                      "), got " + std::to_string(t.shape(0))).c_str());
+             s.sim->set_end_times(t.data(), relative);
+           }, nb::arg("t"), nb::arg("relative") = false,
+           "Set each scene's end time (relative: its time plus t[scene]).")
+      .def("cache_scenes", [](PySim& s) { s.sim->cache_scenes(); },
+           "Keep every scene's state (fluid slots and record, the clock restarted) for restore_scenes.")
+      .def("restore_scenes", [](PySim& s, nb::ndarray<const int, nb::ndim<1>, nb::c_contig, nb::device::cpu> scenes,
+                                nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> turn,
+                                nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> sym) {
+             const size_t k = scenes.shape(0);
+             if (turn.shape(0) != k || turn.shape(1) != 4 || sym.shape(0) != k || sym.shape(1) != 4)
+               throw nb::value_error("restore_scenes: turn and sym must be (k, 4) arrays, one row per scene");
+             nb::gil_scoped_release r;
+             s.sim->restore_scenes(scenes.data(), int(k), turn.data(), sym.data());
+           }, nb::arg("scenes"), nb::arg("turn"), nb::arg("sym"),
+           "Restore distinct scenes from the cache, each turned by a quaternion and its die by another.")
+      .def("observe", [](nb::handle self, bool copy) {
+             PySim& s = nb::cast<PySim&>(self);
+             const int B = s.sim->scenes();
+             nb::dict d;
+             for (const SceneArray& a : s.sim->observe()) {
+               size_t shape[2] = {size_t(B), size_t(a.cols)};
+               const int ndim = a.cols > 1 ? 2 : 1;
+               if (copy) {  // host copies (NumPy arrays of their own)
+                 std::vector<unsigned char> bytes(dtype_size(a.dtype) * size_t(a.cols) * size_t(B));
+                 s.sim->copy_to_host(bytes.data(), a.data, bytes.size());
+                 FieldInfo f{a.name, "scene", a.dtype, a.cols, false, false};
+                 d[a.name.c_str()] = owned(std::move(bytes), f, B);
+                 continue;
+               }
+               // host memory: NumPy arrays; device memory: arrays exposing __dlpack__ (no copies)
+               if (!s.sim->on_device())
+                 d[a.name.c_str()] = nb::cast(nb::ndarray<nb::numpy>(a.data, ndim, shape, self, nullptr, dl(a.dtype)));
+               else
+                 d[a.name.c_str()] = nb::cast(nb::ndarray<nb::array_api>(a.data, ndim, shape, self, nullptr, dl(a.dtype),
+                                                                         nb::device::cuda::value, s.sim->device()));
+             }
+             return d;
+           }, nb::arg("copy") = false,
+           "Per-scene observations as zero-copy arrays (NumPy on the CPU, DLPack on CUDA; overwritten by the next "
+           "call), or host copies (copy=True).")
       .def("set_scalar", [](PySim& s, const std::string& name, nb::handle value, int scene) {
              for (const ScalarInfo& x : s.sim->scalars())
                if (x.name == name) {

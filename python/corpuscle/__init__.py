@@ -1,13 +1,15 @@
 """corpuscle: GPU particle simulator (SPH fluids, DEM gases and granular media, rigid bodies).
 
 `corpuscle.Simulation` runs a scene on the serial, OpenMP (cpu) or CUDA backend;
+`corpuscle.Batch` runs many independent Magic 8-Balls together (`corpuscle.envs` has a
+Gymnasium vector environment over it);
 `corpuscle.open(path)` reads a recorded run. The compiled core is imported lazily so that
 scenes and the CLI's input checks work even where it is missing.
 """
 
 __version__ = "0.1.0"
 
-__all__ = ["Simulation", "open", "load_scene", "__version__"]
+__all__ = ["Simulation", "Batch", "open", "load_scene", "__version__"]
 
 
 def __getattr__(name):
@@ -15,6 +17,9 @@ def __getattr__(name):
     if name == "Simulation":
         from .simulation import Simulation
         return Simulation
+    if name == "Batch":
+        from .batch import Batch
+        return Batch
     if name == "open":
         from .io import open as open_run
         return open_run

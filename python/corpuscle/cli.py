@@ -952,6 +952,9 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
     p.add_argument("--repeats", metavar="R", default="5", help="timed repeats; the median is reported (default: 5)")
     p.add_argument("--warmup", metavar="W", default="20", help="untimed warm-up steps (default: 20)")
+    p.add_argument("--batch", nargs="+", metavar="B",
+                   help="time batches of B independent scenes stepped together (magic8ball; several values: a sweep); "
+                        "reports scene-steps/s and particle-steps/s")
     p.add_argument("--json", metavar="FILE", help="also write the results as a JSON list of rows to FILE")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -966,6 +969,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     args.device = _int_option("--device", args.device, minimum=0)
     args.particles = _int_option("--particles", args.particles)
     scene = _load_with_options(args, {})
+    batches = [_int_option("--batch", b, minimum=1) for b in args.batch] if args.batch else [None]
+    if args.batch and scene.kind != "magic8ball":
+        raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
     if args.json:
         parent = pathlib.Path(args.json).parent
         if not parent.is_dir():
@@ -983,14 +989,21 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if _progress_enabled(argparse.Namespace(no_progress=args.no_progress)):
         from tqdm import tqdm
 
-        bar = tqdm(total=len(backends) * repeats, unit="repeat", file=sys.stderr, leave=False)
+        bar = tqdm(total=len(backends) * len(batches) * repeats, unit="repeat", file=sys.stderr, leave=False)
     rows: list[dict[str, Any]] = []
     try:
-        for backend in backends:
+        for backend, batch in ((b, B) for b in backends for B in batches):
             if bar is not None:
-                bar.set_description(backend)
+                bar.set_description(backend if batch is None else f"{backend} B={batch}")
             t_init = time.perf_counter()
-            sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
+            if batch is None:
+                sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
+            else:
+                from .batch import Batch
+
+                # no settling: the timing does not depend on it
+                sim = Batch.from_scene(scene, n=batch, backend=backend, neighbors=args.neighbors, device=args.device,
+                                       settle=0.0)
             init_seconds = time.perf_counter() - t_init
             if warmup:
                 sim.step(warmup)
@@ -1005,6 +1018,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             row: dict[str, Any] = {
                 "scene": scene.name,
                 "backend": backend,
+                "batch": batch if batch is not None else 1,
+                "scene_steps_per_second": sps * (batch if batch is not None else 1),
                 "particles": n,
                 "steps": steps,
                 "repeats": repeats,
@@ -1019,7 +1034,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "version": __version__,
                 "command": _command_line(args),
             }
-            if backend == "cuda":
+            if backend == "cuda" and batch is None:
                 row["stages"] = {str(k): float(v) for k, v in dict(sim.stage_times(steps)).items()}
             rows.append(row)
             del sim
@@ -1041,13 +1056,17 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def _print_bench(rows: list[dict[str, Any]]) -> None:
     """The benchmark table, then the per-stage table of each backend that has one."""
-    serial = next((r for r in rows if r["backend"] == "serial"), None)
-    head = f"{'backend':<8} {'particles':>10} {'init(s)':>8} {'steps/s':>12} {'particle-steps/s':>18}"
+    batched = any(r.get("batch", 1) != 1 for r in rows)
+    serial = None if batched else next((r for r in rows if r["backend"] == "serial"), None)
+    head = f"{'backend':<8} " + (f"{'batch':>7} " if batched else "") + f"{'particles':>10} {'init(s)':>8} {'steps/s':>12} "
+    head += (f"{'scene-steps/s':>14} " if batched else "") + f"{'particle-steps/s':>18}"
     print(head + (f" {'speedup':>9}" if serial else ""))
     for r in rows:
         init = r.get("init_seconds")
         init_text = f"{init:8.3f}" if isinstance(init, (int, float)) else f"{'':>8}"
-        line = (f"{r['backend']:<8} {r['particles']:>10,} {init_text} {_fmt_rate(r['steps_per_second']):>12} "
+        line = (f"{r['backend']:<8} " + (f"{r.get('batch', 1):>7,} " if batched else "") +
+                f"{r['particles']:>10,} {init_text} {_fmt_rate(r['steps_per_second']):>12} " +
+                (f"{_fmt_rate(r['scene_steps_per_second']):>14} " if batched else "") +
                 f"{_fmt_rate(r['particle_steps_per_second']):>18}")
         if serial:
             line += f" {r['steps_per_second'] / serial['steps_per_second']:>8.1f}x"

@@ -24,6 +24,14 @@ struct Snapshot {
   std::vector<unsigned char> control;  // the controls the next step reads
 };
 
+// an array of one row per scene (`cols` values of `dtype` each) in the backend's memory
+struct SceneArray {
+  std::string name;
+  void* data;
+  DType dtype;
+  int cols;
+};
+
 class Sim {
  public:
   virtual ~Sim() = default;
@@ -73,6 +81,19 @@ class Sim {
   // so a run that checkpoints and the run resumed from it take identical steps)
   virtual Snapshot checkpoint() = 0;
   virtual void restore(const Snapshot& s) = 0;
+
+  // a batch of scenes (kinds that support it; the others throw): every scene's control at
+  // once (values: scenes x the control table's floats, in its order; one upload at the next
+  // step), every scene's end time (relative: added to its time), the reset cache of every
+  // scene's state, the restore of k distinct scenes from it (turn, sym: 4 floats each, see
+  // the kind), and per-scene observations in arrays of their own on the backend
+  virtual void set_controls(const float* values, int cols) = 0;
+  virtual void set_end_times(const double* t, bool relative) = 0;
+  virtual void cache_scenes() = 0;
+  virtual void restore_scenes(const int* scenes, int k, const float* turn, const float* sym) = 0;
+  virtual std::vector<SceneArray> observe() = 0;
+  // copy bytes of the backend's memory (an observe() array) to the host
+  virtual void copy_to_host(void* dst, const void* src, size_t bytes) = 0;
 
   // seconds for n steps on the backend's clock after a synchronise; per-stage ms per step
   virtual double bench(long long n) = 0;

@@ -12,6 +12,8 @@
 #include <algorithm>
 #include <cstring>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "corpuscle/core/copies.h"
@@ -20,6 +22,13 @@
 #include "corpuscle/sim/sim.h"
 
 namespace cps {
+
+// whether a kind's pipeline has a batch's reset cache, restore and observations
+// (cache_scenes, restore_scenes, observe; the CUDA build is C++17: no concepts)
+template <class P, class = void>
+struct has_batch_api : std::false_type {};
+template <class P>
+struct has_batch_api<P, std::void_t<decltype(std::declval<P&>().cache_scenes())>> : std::true_type {};
 
 template <class Exec, class P>
 class SimImpl final : public Sim {
@@ -242,6 +251,77 @@ class SimImpl final : public Sim {
     p_.invalidate(true);
   }
 
+  void set_controls(const float* values, int cols) override {
+    int total = 0;
+    for (const ScalarInfo& c : controls_) {
+      if (c.dtype != DType::F32) throw Error(std::string(P::kind) + ": only float controls are set by array");
+      total += c.count;
+    }
+    if (cols != total)
+      throw Error(std::string(P::kind) + ": the controls of every scene need " + std::to_string(total) +
+                  " values a scene, got " + std::to_string(cols));
+    for (int k = 0; k < scenes(); ++k) {
+      int col = 0;
+      for (const ScalarInfo& c : controls_) {
+        std::memcpy(reinterpret_cast<char*>(&ctl_[k]) + c.offset, values + size_t(k) * cols + col,
+                    sizeof(float) * size_t(c.count));
+        col += c.count;
+      }
+    }
+    ctl_dirty_ = true;
+  }
+
+  void set_end_times(const double* t, bool relative) override {
+    std::vector<Record> r = records();
+    for (size_t k = 0; k < r.size(); ++k) {
+      Record& x = r[k];
+      x.clock.end_time = relative ? x.clock.time + t[k] : t[k];
+      x.clock.done = x.clock.time >= x.clock.end_time ? 1 : 0;
+    }
+    write_records(r);
+  }
+
+  void cache_scenes() override {
+    if constexpr (has_batch_api<P>::value) {
+      p_.cache_scenes();
+      ex_.synchronize();
+    } else {
+      unsupported("reset cache");
+    }
+  }
+
+  void restore_scenes(const int* scenes_, int k, const float* turn, const float* sym) override {
+    if constexpr (has_batch_api<P>::value) {
+      std::vector<char> seen(size_t(scenes()), 0);
+      for (int q = 0; q < k; ++q) {
+        check_scene(scenes_[q]);
+        if (seen[size_t(scenes_[q])]++)
+          throw Error(std::string(P::kind) + ": scene " + std::to_string(scenes_[q]) + " is restored twice");
+      }
+      p_.restore_scenes(scenes_, k, turn, sym);
+      ex_.synchronize();
+      rec_valid_ = false;
+    } else {
+      unsupported("reset cache");
+    }
+  }
+
+  std::vector<SceneArray> observe() override {
+    if constexpr (has_batch_api<P>::value) {
+      auto out = p_.observe();
+      ex_.synchronize();  // the arrays are read by other streams and libraries
+      return out;
+    } else {
+      unsupported("observations");
+      return {};
+    }
+  }
+
+  void copy_to_host(void* dst, const void* src, size_t bytes) override {
+    ex_.synchronize();
+    ex_.to_host(dst, src, bytes);
+  }
+
   double bench(long long n) override {
     step(1, {});  // capture / warm the step outside the timing
     ex_.synchronize();
@@ -267,6 +347,9 @@ class SimImpl final : public Sim {
 
  private:
   static bool halted(const Record& r) { return r.clock.done != 0 || r.clock.bad != 0; }
+  [[noreturn]] static void unsupported(const char* what) {
+    throw Error(std::string(P::kind) + ": this kind has no " + what + " (batches of scenes: magic8ball)");
+  }
   // a fixed-capacity buffer that overflowed stopped its scene before the step was taken: the
   // pipeline grows it when it can (clearing the flags it handled) and the step is repeated
   bool recover() {

@@ -18,27 +18,16 @@ inline Model build_model(const ParamSource& p) {
   if (m.n_scenes < 1 || (long long)m.n_scenes * m.n_fluid > (1LL << 29))
     throw Error("magic8ball: n_scenes must be at least 1 and n_scenes * n_fluid at most 2^29");
   m.h = p.f("h");
-  m.sph.mass = p.f("mass");
-  m.sph.rest_density = p.f("rest_density");
-  m.sph.stiffness = p.f("stiffness");
-  m.sph.gamma = p.f("gamma");
-  m.sph.viscosity = p.f("viscosity");
-  m.sph.xsph = p.f("xsph");
-  m.sph.density_floor = p.f("density_floor");
   m.kern = SphKernels<D>::make(m.h);
   m.max_neighbors = int(p.integer("max_neighbors"));
   m.max_near = int(p.integer("max_near"));
   m.max_list_bytes = p.has("max_list_bytes") ? p.number("max_list_bytes") : 0.0;
   m.list_radius = p.f("list_radius");
   m.rebuild_disp2 = p.f("rebuild_distance") * p.f("rebuild_distance");
-  m.c0 = tait_sound_speed(m.sph);
   m.wall = SphereWall{p.f("radius"), p.f("wall_restitution"), p.f("wall_friction")};
   m.shell_inertia = p.f("shell_inertia");
   m.spin_damping = p.f("spin_damping");
   m.gravity = p.vec3("gravity");
-  m.die.half = p.vec3("die_half");
-  m.die.mass = p.f("die_mass");
-  m.die.inertia = p.vec3("die_inertia");
   m.contact = ContactParams{p.f("contact_margin"), p.f("contact_stiffness"), p.f("contact_drag")};
   m.body = BodyParams{p.f("die_linear_damping"), p.f("die_angular_damping"), p.f("die_restitution")};
   m.dt = DtParams{p.f("dt_min"), p.f("dt_max"), p.f("cfl_advective"), p.f("cfl_acoustic"), p.f("cfl_force"),
@@ -72,19 +61,57 @@ inline RigidState die_from(const ParamSource& d) {
   return s;
 }
 
+// the parameters of one scene: the batch-wide ones, where the scene's own table (`own`, from
+// the list `scenes`) does not give them (mass, stiffness, viscosity, die_half, die_mass,
+// die_inertia, n_fluid: the particles of the scene, at most the batch's n_fluid slots)
+inline ScenePhysics scene_physics(const ParamSource& p, const ParamSource* own, int slots, int scene) {
+  auto num = [&](const char* k) { return own && own->has(k) ? own->f(k) : p.f(k); };
+  auto vec = [&](const char* k) { return own && own->has(k) ? own->vec3(k) : p.vec3(k); };
+  ScenePhysics s{};
+  s.sph.mass = num("mass");
+  s.sph.rest_density = p.f("rest_density");
+  s.sph.stiffness = num("stiffness");
+  s.sph.gamma = p.f("gamma");
+  s.sph.viscosity = num("viscosity");
+  s.sph.xsph = p.f("xsph");
+  s.sph.density_floor = p.f("density_floor");
+  s.c0 = tait_sound_speed(s.sph);
+  s.die = RigidBox{vec("die_half"), num("die_mass"), vec("die_inertia")};
+  s.n_active = own && own->has("n_fluid") ? int(own->integer("n_fluid")) : slots;
+  if (s.n_active < 1 || s.n_active > slots)
+    throw Error("magic8ball: scenes[" + std::to_string(scene) + "].n_fluid must be in 1.." + std::to_string(slots) +
+                " (the batch's n_fluid), got " + std::to_string(s.n_active));
+  if (!(s.sph.mass > 0.0f) || !(s.sph.stiffness > 0.0f) || !(s.sph.viscosity >= 0.0f) || !(s.die.mass > 0.0f) ||
+      !(s.die.half[0] > 0.0f && s.die.half[1] > 0.0f && s.die.half[2] > 0.0f))
+    throw Error("magic8ball: scenes[" + std::to_string(scene) +
+                "]: mass, stiffness, die_mass and die_half must be positive, viscosity not negative");
+  return s;
+}
+
 // one initial record per scene: `die_initial` is one table (every scene) or a list of one
-// table per scene
+// table per scene (`die_initial_scenes`); `scenes`, where given, one table of parameters per
+// scene (scene_physics)
 template <class P>
-std::vector<Scene> initial_records(const ParamSource& p, int scenes) {
-  std::vector<Scene> out;
+std::vector<Scene> initial_records(const ParamSource& p, const Model& m) {
+  const int scenes = m.n_scenes;
+  std::vector<std::unique_ptr<ParamSource>> own;
+  if (p.has("scenes")) {
+    own = p.tables("scenes");
+    if (int(own.size()) != scenes) throw Error("magic8ball: scenes needs " + std::to_string(scenes) + " tables");
+  }
+  std::vector<std::unique_ptr<ParamSource>> dies;
   if (p.has("die_initial_scenes")) {
-    auto t = p.tables("die_initial_scenes");
-    if (int(t.size()) != scenes)
+    dies = p.tables("die_initial_scenes");
+    if (int(dies.size()) != scenes)
       throw Error("magic8ball: die_initial_scenes needs " + std::to_string(scenes) + " tables");
-    for (auto& d : t) out.push_back(P::initial_record(die_from(*d)));
-  } else {
-    Scene r = P::initial_record(die_from(*p.table("die_initial")));
-    out.assign(size_t(scenes), r);
+  }
+  const RigidState die0 = dies.empty() ? die_from(*p.table("die_initial")) : RigidState{};
+  std::vector<Scene> out;
+  for (int s = 0; s < scenes; ++s) {
+    ScenePhysics phys = scene_physics(p, own.empty() ? nullptr : own[s].get(), m.n_fluid, s);
+    if (scenes == 1 && phys.n_active != m.n_fluid)
+      throw Error("magic8ball: a single scene has n_fluid particles (scenes[0].n_fluid must equal it)");
+    out.push_back(P::initial_record(dies.empty() ? die0 : die_from(*dies[s]), phys));
   }
   return out;
 }
@@ -94,7 +121,7 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
   using P = Pipeline<std::decay_t<Exec>, Index>;
   Model m = build_model(*r.params);
   auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), m,
-                                                              initial_records<P>(*r.params, m.n_scenes), r.device);
+                                                              initial_records<P>(*r.params, m), r.device);
   // the initial particles
   for (const char* name : {"position", "velocity"}) {
     if (!r.arrays || !r.arrays->has(name)) throw Error(std::string("magic8ball: no initial ") + name + " array");

@@ -24,9 +24,10 @@ struct ShakeWindow {
   Vec3 torque;
 };
 
-// constant per-scene parameters
+// constant parameters shared by every scene of a state (what a study varies per scene is in
+// ScenePhysics, in each scene's record)
 struct Model {
-  int n_fluid;           // fluid particles of each scene (ghost slots: the same number again)
+  int n_fluid;           // fluid slots of each scene, the batch-wide most (ghost slots: the same again)
   int n_scenes;          // independent scenes of the same model in one state (1: a single run)
   int max_neighbors;     // neighbour list capacity per particle (within the list radius)
   int max_near;          // capacity of the per-step list of neighbours within h
@@ -34,20 +35,28 @@ struct Model {
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
   float h;               // smoothing length
-  SphParams sph;
   SphKernels<D> kern;
-  float c0;              // sound speed
   SphereWall wall;
   float shell_inertia;   // kg m^2
   float spin_damping;    // 1/s
   Vec3 gravity;          // lab frame
-  RigidBox die;
   ContactParams contact;
   BodyParams body;
   DtParams dt;
   GridSpec<D> grid;
   int n_shakes;
   ShakeWindow shakes[kMaxShakes];
+};
+
+// the parameters a study varies per scene: the fluid's (particle mass, stiffness, viscosity,
+// ...), the die's size, mass and inertia, and how many of the scene's slots hold particles.
+// A scene of n_active < Model::n_fluid particles keeps them in the first n_active slots of its
+// range; the rest are inactive (keyed past every cell, never visited, never integrated).
+struct ScenePhysics {
+  SphParams sph;
+  RigidBox die;
+  float c0;              // sound speed (from sph)
+  int n_active;          // fluid particles of the scene (at most Model::n_fluid)
 };
 
 // per-step reductions over the fluid (combined with StepSums::combine, a fixed order per backend)
@@ -99,6 +108,7 @@ struct Control {
 // the per-scene record: one copy brings all of it to the host
 struct Scene {
   Clock clock;
+  ScenePhysics phys;     // constant: the scene's own parameters
   // state the next step reads (checkpointed)
   RigidState die;
   Quat shell_q;          // container orientation (container -> lab)

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/scenes/magic8ball/batch.h"
 #include "corpuscle/scenes/magic8ball/stages.h"
 #include "corpuscle/scenes/magic8ball/tables.h"
 
@@ -88,8 +89,9 @@ class Pipeline {
   int scenes() const { return m_.n_scenes; }
 
   // the record of a new scene: the clock at zero, the die as given, the shell at rest
-  static Scene initial_record(const RigidState& die) {
+  static Scene initial_record(const RigidState& die, const ScenePhysics& phys) {
     Scene s{};
+    s.phys = phys;
     s.clock.time = 0.0;
     s.clock.end_time = 1e300;
     s.clock.step = 0;
@@ -221,7 +223,7 @@ class Pipeline {
                                        StepSums::identity(), FinalizeStage{md, g});
       } else {
         ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
-        ex_.for_each(B, SceneReduceStage{md, s.items, scene_sums_.data()});
+        ex_.for_each(B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
         ex_.for_each(B, FinalizeStage{md, g, scene_sums_.data()});
       }
       ex_.mark(2);
@@ -233,7 +235,7 @@ class Pipeline {
       if constexpr (!Many) {
         ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
       } else {
-        ex_.for_each(B, SceneReduceStage{md, s.items, scene_sums_.data()});
+        ex_.for_each(B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
         ex_.for_each(B, StoreSumsStage{g, scene_sums_.data()});
       }
       ex_.mark(2);
@@ -276,14 +278,61 @@ class Pipeline {
     invalidate(true);
   }
 
+  // a batch's reset cache: every scene's fluid slots and record as they are now, the clock
+  // restarted (allocated on first use: 28 bytes a fluid slot)
+  void cache_scenes() {
+    const int n = total_fluid(m_), B = m_.n_scenes;
+    if (cache_rec_.size() == 0) {
+      cache_pos_.resize(n);
+      cache_vel_.resize(n);
+      cache_id_.resize(n);
+      cache_rec_.resize(B);
+      turns_.resize(B);
+    }
+    ex_.for_each(n, CacheFluidStage{arrays(parity_, parity_ ^ 1), cache_pos_.data(), cache_vel_.data(), cache_id_.data()});
+    ex_.for_each(B, CacheRecordStage{g_, cache_rec_.data()});
+  }
+  // restore k distinct scenes from the cache, each turned by turn[4q..] and its die by
+  // sym[4q..] (w, x, y, z; identity: the cached state exactly); the next step sorts and
+  // relists them, the other scenes go on untouched
+  void restore_scenes(const int* scenes, int k, const float* turn, const float* sym) {
+    if (cache_rec_.size() == 0) throw Error("magic8ball: no cached scenes to restore (cache_scenes first)");
+    if (k <= 0) return;
+    std::vector<SceneTurn> t(static_cast<size_t>(k));
+    for (int q = 0; q < k; ++q)
+      t[q] = SceneTurn{Quat{turn[4 * q], turn[4 * q + 1], turn[4 * q + 2], turn[4 * q + 3]},
+                       Quat{sym[4 * q], sym[4 * q + 1], sym[4 * q + 2], sym[4 * q + 3]}, scenes[q]};
+    ex_.to_device(turns_.data(), t.data(), sizeof(SceneTurn) * t.size());
+    ex_.for_each(k * m_.n_fluid, RestoreFluidStage{model_.data(), cache_rec_.data(), turns_.data(),
+                                                   arrays(parity_, parity_ ^ 1), cache_pos_.data(),
+                                                   cache_vel_.data(), cache_id_.data()});
+    ex_.for_each(k, RestoreRecordStage{g_, cache_rec_.data(), turns_.data()});
+  }
+  // the per-scene observations, written into arrays of their own (valid until the next call)
+  std::vector<SceneArray> observe() {
+    const int B = m_.n_scenes;
+    if (obs_f_.size() == 0) {
+      obs_f_.resize(13 * size_t(B));
+      obs_i_.resize(3 * size_t(B));
+      obs_t_.resize(B);
+    }
+    float* f = obs_f_.data();
+    int* i = obs_i_.data();
+    ex_.for_each(B, ObserveStage{g_, f, f + 3 * B, f + 7 * B, f + 10 * B, i, i + B, i + 2 * B, obs_t_.data()});
+    return {{"die_position", f, DType::F32, 3},           {"die_orientation", f + 3 * B, DType::F32, 4},
+            {"die_velocity", f + 7 * B, DType::F32, 3},   {"die_angular_velocity", f + 10 * B, DType::F32, 3},
+            {"answer_face", i, DType::I32, 1},            {"time", obs_t_.data(), DType::F64, 1},
+            {"done", i + B, DType::I32, 1},               {"bad", i + 2 * B, DType::I32, 1}};
+  }
+
   // named values derived from the record
   std::vector<std::pair<std::string, double>> derived(const Scene& r) const {
     Vec3 w = qrotate(r.die.q, r.die.w_body);  // the die's angular velocity in the container frame
     return {{"answer_face", double(window_face(r.die.q))},
-            {"chosen_dt", double(sums_dt(m_, r.sums, r.die))},  // what a step would choose from these sums
+            {"chosen_dt", double(sums_dt(m_, r.phys, r.sums, r.die))},  // what a step would choose from these sums
             {"vmax", std::sqrt(double(r.sums.vmax2))},
             {"amax", std::sqrt(double(r.sums.amax2))},
-            {"mean_density", double(r.sums.rho_sum) / double(m_.n_fluid)},
+            {"mean_density", double(r.sums.rho_sum) / double(r.phys.n_active)},
             {"max_neighbors", double(m_.max_neighbors)},  // the list capacities now (they grow)
             {"max_near", double(m_.max_near)},
             {"die_angular_velocity_x", double(w[0])},
@@ -340,6 +389,13 @@ class Pipeline {
   Buf<uint32_t> cells_start_, cells_end_;
   Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort
   Buf<StepSums> scene_sums_;              // a batch's per-scene reductions
+  Buf<Vec3> cache_pos_, cache_vel_;       // a batch's reset cache (cache_scenes)
+  Buf<int> cache_id_;
+  Buf<Scene> cache_rec_;
+  Buf<SceneTurn> turns_;                  // the scenes a restore_scenes call restores
+  Buf<float> obs_f_;                      // observations (observe)
+  Buf<int> obs_i_;
+  Buf<double> obs_t_;
   int parity_ = 0;
   bool sorted_ = false;
   bool keys_ready_ = false;  // the last step's integration keyed the current state

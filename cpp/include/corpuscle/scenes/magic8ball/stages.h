@@ -52,11 +52,19 @@ struct Scenes {
   }
 };
 
-// cell keys of fluid particle i at x and of its ghost slot N + i, with identity values
-CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x) {
+// whether fluid slot i holds a particle: a scene of n_active particles uses the first n_active
+// slots of its range (a single scene all of them)
+CPS_HD CPS_INLINE bool active_slot(const Model& m, const Scene* g, int i) {
+  return m.n_scenes == 1 || i % m.n_fluid < g[i / m.n_fluid].phys.n_active;
+}
+
+// cell keys of fluid particle i at x and of its ghost slot N + i, with identity values (an
+// inactive slot is keyed past every cell: sorted to its segment's tail, never visited)
+CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x, bool active) {
   const int N = total_fluid(m);
-  a.keys[i] = m.grid.key(x, 0);
-  a.keys[N + i] = needs_ghost(m.wall, x, m.list_radius) ? m.grid.key(mirror_position(m.wall, x), 1) : m.grid.sentinel();
+  a.keys[i] = active ? m.grid.key(x, 0) : m.grid.sentinel();
+  a.keys[N + i] = active && needs_ghost(m.wall, x, m.list_radius) ? m.grid.key(mirror_position(m.wall, x), 1)
+                                                                 : m.grid.sentinel();
   a.idx[i] = i;
   a.idx[N + i] = N + i;
 }
@@ -81,13 +89,13 @@ CPS_HD CPS_INLINE int keys_items(const Model& m) {
 
 // the work that starts a step: clear the cell tables, key every particle (the container
 // frame is set by the step's density stage, from the control as it is then)
-CPS_HD CPS_INLINE void start_step(const Model& m, const Arrays& a, int i, const Vec3* x) {
+CPS_HD CPS_INLINE void start_step(const Model& m, const Arrays& a, int i, const Vec3* x, bool active) {
   if (size_t(i) < cells_per_scene(m) * size_t(m.n_scenes)) {
     a.cell_start[i] = 0u;
     a.cell_end[i] = 0u;
   }
   if (i < total_fluid(m)) {
-    write_keys(m, a, i, *x);
+    write_keys(m, a, i, *x, active);
     a.ghost_of[i] = -1;
   }
 }
@@ -101,7 +109,7 @@ struct KeysStage {
     const Model& m = *model;
     const bool fluid = i < total_fluid(m);
     Vec3 x = fluid ? a.pos[i] : Vec3::zero();
-    start_step(m, a, i, &x);
+    start_step(m, a, i, &x, fluid && active_slot(m, g, i));
     if (fluid && Scenes<true>::first(m, i)) {
       Scene* gs = g + Scenes<true>::of(m, i);
       gs->rebuild[gs->clock.step & 1] = 1;  // a new state is always sorted and listed
@@ -176,6 +184,11 @@ struct ReorderStage {
       if (last) a.cell_end[slot] = uint32_t(j + 1);
     }
     if (k >= sentinel) {
+      if (fluid) {  // an inactive slot (its segment's tail) keeps its values
+        a.pos_alt[j] = a.pos[a.perm[j]];
+        a.vel_alt[j] = a.vel[a.perm[j]];
+        a.id_alt[j] = a.id[a.perm[j]];
+      }
       if (!fluid && j == begin) gs->n_ghost = 0;  // no ghost in this scene
       return;
     }
@@ -244,7 +257,7 @@ struct PairWalk {
   CPS_HD static int all_pairs(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
                               const Lanes& L, V& v) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    return L.for_each_in_range(grid.pos, s * n, s * n + n, x, m.kern.h2, v) +
+    return L.for_each_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, m.kern.h2, v) +
            L.for_each_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, m.kern.h2, v);
   }
   template <class Lanes, class V>
@@ -282,7 +295,8 @@ struct DensityStage {
     using S = Scenes<Many>;
     const int s = S::of(m, i);
     Scene* gs = g + s;
-    if (halted(gs)) return;
+    if (halted(gs) || (Many && i - s * m.n_fluid >= gs->phys.n_active)) return;
+    const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
     const bool rebuild = rebuilding(gs);
@@ -297,9 +311,9 @@ struct DensityStage {
       if (rebuild) a.nbr_count[i] = count;
     }
     if (rebuild) a.ghost_slot[i] = a.ghost_of[a.perm[i]];
-    float cut = m.kern.box_fraction(m.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
-    float rho = finish_density(m.sph, sum / (1.0f - fmin2(cut, 0.5f)));
-    float p = tait_pressure(m.sph, rho);
+    float cut = m.kern.box_fraction(P.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
+    float rho = finish_density(P.sph, sum / (1.0f - fmin2(cut, 0.5f)));
+    float p = tait_pressure(P.sph, rho);
     a.rho[i] = rho;
     a.prs[i] = p;
     // the ghost of this particle carries the same density and pressure
@@ -326,8 +340,10 @@ struct ForceStage {
     using S = Scenes<Many>;
     const int sc = S::of(m, i);
     const Scene* gs = g + sc;
-    if (halted(gs)) return;  // the reduction of a step not taken is discarded
-    ForceVisitor<D> fv(m.kern, m.sph, a.vel, a.rho, a.prs, i, S::fluid(m));
+    // the reduction of a step not taken is discarded; inactive slots are not reduced
+    if (halted(gs) || (Many && i - sc * m.n_fluid >= gs->phys.n_active)) return;
+    const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
+    ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.prs, i, S::fluid(m));
     Vec3 x = a.pos[i];
     PairWalk<Index, Many>::forces(m, gs, a, S::grid(m, grid, sc), i, x, L, fv);
     fv.reduce(L);
@@ -337,9 +353,9 @@ struct ForceStage {
     StepSums s = StepSums::identity();
     // die: contact spring + drag on the particle, reaction on the die
     Vec3 ad;
-    if (body_contact(m.contact, m.die, gs->die, x, v, ad)) {
+    if (body_contact(m.contact, P.die, gs->die, x, v, ad)) {
       acc += ad;
-      Vec3 F = ad * (-m.sph.mass);
+      Vec3 F = ad * (-P.sph.mass);
       s.force = F;
       s.torque = cross(x - gs->die.x, F);
       s.contacts = 1;
@@ -347,12 +363,12 @@ struct ForceStage {
     a.acc[i] = acc;
     a.xsph[i] = fv.xsph_correction();
     float rho = a.rho[i];
-    float err = rho / m.sph.rest_density - 1.0f;
+    float err = rho / P.sph.rest_density - 1.0f;
     s.vmax2 = norm2(v);
     s.amax2 = norm2(acc);
     s.rho_err = err < 0.0f ? -err : err;
     s.rho_sum = rho;
-    s.ke = 0.5f * m.sph.mass * s.vmax2;
+    s.ke = 0.5f * P.sph.mass * s.vmax2;
     a.items[i] = s;
   }
 };
@@ -362,8 +378,8 @@ struct ForceStage {
 CPS_HD CPS_INLINE float max_speed(const StepSums& s, const RigidState& die) {
   return fmax2(fsqrt(s.vmax2), norm(die.v));
 }
-CPS_HD CPS_INLINE float sums_dt(const Model& m, const StepSums& s, const RigidState& die) {
-  return choose_dt(m.dt, m.h, max_speed(s, die), fsqrt(s.amax2), m.c0, m.sph.viscosity / m.sph.rest_density);
+CPS_HD CPS_INLINE float sums_dt(const Model& m, const ScenePhysics& P, const StepSums& s, const RigidState& die) {
+  return choose_dt(m.dt, m.h, max_speed(s, die), fsqrt(s.amax2), P.c0, P.sph.viscosity / P.sph.rest_density);
 }
 
 // a batch's reductions, one scene per item, in the CPU backend's fixed order (kReduceChunks
@@ -371,10 +387,11 @@ CPS_HD CPS_INLINE float sums_dt(const Model& m, const StepSums& s, const RigidSt
 constexpr int kSceneReduceChunks = 64;  // = CpuExec::kReduceChunks
 struct SceneReduceStage {
   const Model* model;
+  const Scene* g;
   const StepSums* items;
   StepSums* out;
   CPS_HD void operator()(int s) const {
-    const int n = model->n_fluid, base = s * n;
+    const int n = g[s].phys.n_active, base = s * model->n_fluid;
     const int chunk = (n + kSceneReduceChunks - 1) / kSceneReduceChunks;
     StepSums total = StepSums::identity();
     for (int c = 0; c < kSceneReduceChunks; ++c) {
@@ -419,19 +436,19 @@ struct FinalizeStage {
     G.rebuilds += G.rebuild[C.step & 1];
     G.rebuild[C.step & 1] = 0;  // this step's readers are done with its flag
     const StepSums& S = sums ? sums[scene] : G.pending;
-    float dt = sums_dt(m, S, G.die);
+    float dt = sums_dt(m, G.phys, S, G.die);
     const bool last = C.time + double(dt) >= C.end_time;
     if (last) dt = float(C.end_time - C.time);
     // faults found before integrating: a non-finite state is not integrated (the state
     // stays as it was); a runaway speed is integrated once more and then stops the run
     int fault = 0;
     if (!finite(S.vmax2) || !finite(S.amax2)) fault = kBadParticles;
-    const bool runaway = !fault && max_speed(S, G.die) > 100.0f * m.c0;
+    const bool runaway = !fault && max_speed(S, G.die) > 100.0f * G.phys.c0;
     // the die under the fluid's reaction, then kept inside the sphere
     RigidState d = G.die;
     if (!fault) {
-      integrate_box(m.die, m.body, G.frame, S.force, S.torque, dt, d);
-      keep_box_in_sphere(m.die, m.wall.radius, m.body.restitution, d);
+      integrate_box(G.phys.die, m.body, G.frame, S.force, S.torque, dt, d);
+      keep_box_in_sphere(G.phys.die, m.wall.radius, m.body.restitution, d);
       if (!finite(d.x[0] + d.x[1] + d.x[2] + d.v[0] + d.v[1] + d.v[2] + d.q.w + d.q.x + d.q.y + d.q.z +
                   d.w_body[0] + d.w_body[1] + d.w_body[2]))
         fault = kBadDie;
@@ -471,8 +488,10 @@ struct IntegrateStage {
     Vec3 x = Vec3::zero();
     const bool fluid = i < Scenes<Many>::fluid(m);
     Scene* gs = g + (fluid ? Scenes<Many>::of(m, i) : 0);
-    // a step that was not taken (halted before integrating) leaves the particles as they are
-    const bool taken = gs->step_dt > 0.0f;
+    // a step that was not taken (halted before integrating) leaves the particles as they are,
+    // and so do inactive slots (a batch's; a single run has none)
+    const bool active = fluid && (!Many || active_slot(m, g, i));
+    const bool taken = active && gs->step_dt > 0.0f;
     if (fluid && !taken) x = a.pos[i];
     if (fluid && taken) {
       float dt = gs->step_dt;
@@ -491,7 +510,7 @@ struct IntegrateStage {
       // moved too far for the lists: the next step rebuilds (the clock is already the next)
       if (norm2(x - a.x_build[i]) > m.rebuild_disp2) raise_flag(&gs->rebuild[gs->clock.step & 1], 1);
     }
-    start_step(m, a, i, &x);
+    start_step(m, a, i, &x, active);
   }
 };
 
