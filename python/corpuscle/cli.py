@@ -1054,6 +1054,49 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
 register(Command("bench", "time steps per second on each backend", _configure_bench, _cmd_bench))
 
 
+# ---------------------------------------------------------------------------
+# corpuscle validate
+# ---------------------------------------------------------------------------
+
+
+def _configure_validate(p: argparse.ArgumentParser) -> None:
+    from . import validation
+
+    p.add_argument("name", metavar="NAME", help=f"what to validate: {', '.join(validation.VALIDATIONS)}")
+    p.add_argument("--json", action="store_true", help="print the checks as JSON (after the table)")
+    # each validation's own options; those of the one named are parsed in _cmd_validate
+    p.add_argument("options", nargs=argparse.REMAINDER, help="the validation's options (NAME --help lists them)")
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from . import validation
+
+    module = validation.load(args.name)  # unknown name: ValueError, one line, exit 2
+    sub = _Parser(prog=f"{PROG} validate {args.name}", description=(module.__doc__ or "").strip().splitlines()[0])
+    sub.add_argument("--json", action="store_true", help="print the checks as JSON (after the table)")
+    module.add_arguments(sub)
+    opts = sub.parse_args(args.options)  # bad options exit 2 with one line
+    want_json = bool(args.json or opts.json)
+    checks = module.run(opts)
+    print()
+    rows = [(c.name, f"{c.measured:.6g}", f"{c.reference:.6g}", f"{c.measured - c.reference:+.4g}",
+             f"{c.tolerance:.4g}" + (f" {c.unit}" if c.unit else ""), "PASS" if c.passed else "FAIL") for c in checks]
+    head = ("check", "measured", "reference", "difference", "tolerance", "")
+    widths = [max(len(str(r[k])) for r in [head, *rows]) for k in range(6)]
+    print("  ".join(str(h).ljust(w) if k == 0 else str(h).rjust(w) for k, (h, w) in enumerate(zip(head, widths))))
+    for r in rows:
+        print("  ".join(str(x).ljust(w) if k == 0 else str(x).rjust(w) for k, (x, w) in enumerate(zip(r, widths))))
+    ok = all(c.passed for c in checks) and bool(checks)
+    if want_json:
+        print(json.dumps(validation.as_dicts(checks), indent=2, default=_json_default))
+    print("PASS" if ok else "FAIL")
+    return EXIT_OK if ok else 1
+
+
+register(Command("validate", "run a validation case and check it against its reference (PASS/FAIL)",
+                 _configure_validate, _cmd_validate))
+
+
 def _register_viz() -> None:
     """render / plot / export (issue 3): their modules import heavy libraries lazily."""
     from . import export, plot, render

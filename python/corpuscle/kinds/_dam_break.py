@@ -35,8 +35,8 @@ def dam_keys(dim: int, smoothing: float) -> dict[str, KeySpec]:
 
 
 def _fits(values, arrays) -> None:
-    if values["dam.tank_length"] <= 1.0 or values["dam.tank_height"] < values["dam.height"]:
-        raise SceneError(f"dam.tank_length = {values['dam.tank_length']} must exceed 1 and dam.tank_height = "
+    if values["dam.tank_length"] < 1.0 or values["dam.tank_height"] < values["dam.height"]:
+        raise SceneError(f"dam.tank_length = {values['dam.tank_length']} must be >= 1 and dam.tank_height = "
                          f"{values['dam.tank_height']} must be >= dam.height = {values['dam.height']} (units of a)")
 
 

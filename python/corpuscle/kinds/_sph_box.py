@@ -4,7 +4,7 @@ and height 2a against a wall) share. The core is cpp/include/corpuscle/scenes/sp
 
 The model is DualSPHysics's: continuity density, Tait's equation of state, Monaghan's
 artificial or the laminar viscosity, optional delta-SPH (Molteni & Colagrossi 2009 or
-Fourtakas et al. 2019), the CFL time step, symplectic Euler. Walls are dynamic boundary
+Fourtakas et al. 2019), the CFL time step, the Verlet scheme (or symplectic Euler). Walls are dynamic boundary
 particles (DBC; Crespo, Gomez-Gesteira & Dalrymple 2007): lattice layers outside every face
 of the box, as deep as the kernel support, whose density follows the continuity equation.
 
@@ -32,6 +32,7 @@ from . import Build, Kind, Target, check_memory, key_values
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
 VISCOSITIES = {"artificial": 0, "laminar": 1}
 DIFFUSIONS = {"none": 0, "molteni": 1, "fourtakas": 2}
+INTEGRATORS = {"verlet": 0, "symplectic-euler": 1}
 UNSTABLE_REASONS = {1: "a density, velocity or position became non-finite (NaN/inf)"}
 
 _K = KeySpec
@@ -71,6 +72,10 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
         "timestep.cfl": _K("float", 0.2, "", 0.0, 1.0, "CFL number of the time step (DualSPHysics: 0.2)", lo_open=True),
         "timestep.dt_min": _K("float", 1e-9, "s", 0.0, 1.0, "smallest time step", lo_open=True),
         "timestep.dt_max": _K("float", 1e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),
+        "timestep.integrator": _K("enum", "verlet", "", doc="verlet (DualSPHysics's default, an Euler step every "
+                                  "timestep.verlet_steps) or symplectic-euler (needs a CFL near 0.05)",
+                                  choices=tuple(INTEGRATORS)),
+        "timestep.verlet_steps": _K("int", 40, "steps", 1, 10**6, "Verlet: an Euler step every this many steps"),
     }
 
 
@@ -173,6 +178,7 @@ class SphBox(Kind):
             "nu": float(v["sph.nu"]), "diffusion": DIFFUSIONS[v["sph.diffusion"]], "delta": float(v["sph.delta"]),
             "cfl": float(v["timestep.cfl"]), "dt_min": float(v["timestep.dt_min"]),
             "dt_max": float(v["timestep.dt_max"]), "gravity": gravity,
+            "integrator": INTEGRATORS[v["timestep.integrator"]], "verlet_steps": int(v["timestep.verlet_steps"]),
             "box_lo": [0.0] * D, "box_hi": box_hi.tolist(),
             "domain_lo": (-(layers + 1) * dp * np.ones(D)).tolist(), "domain_hi": (box_hi + (layers + 1) * dp).tolist(),
             "probes": [float(x) for p in probes for x in p],

@@ -56,6 +56,11 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   m.cfl = p.f("cfl");
   m.dt_min = p.f("dt_min");
   m.dt_max = p.f("dt_max");
+  m.integrator = int(p.integer("integrator"));
+  m.verlet_steps = int(p.integer("verlet_steps"));
+  if (m.integrator != kVerlet && m.integrator != kSymplecticEuler)
+    throw Error(std::string(kind) + ": integrator must be 0 (Verlet) or 1 (symplectic Euler)");
+  if (m.verlet_steps < 1) throw Error(std::string(kind) + ": verlet_steps must be at least 1");
   m.gravity = g;
   m.lo = vecd<D>(p, "box_lo", kind);
   m.hi = vecd<D>(p, "box_hi", kind);

@@ -6,7 +6,7 @@
 // 2022, Comput. Part. Mech. 9): the continuity equation for the density, Tait's equation of
 // state, the symmetric pressure gradient, Monaghan's artificial or the laminar viscosity,
 // optional delta-SPH density diffusion (physics/sph_pair_terms.h), the CFL time step of
-// physics/timestep.h (choose_dt_cfl) and symplectic Euler.
+// physics/timestep.h (choose_dt_cfl) and the Verlet scheme (or symplectic Euler).
 //
 // Walls are dynamic boundary particles (DBC: Crespo, Gomez-Gesteira & Dalrymple 2007,
 // Comput. Mater. Continua 5; DualSPHysics's default): layers of fixed particles on a lattice
@@ -31,6 +31,11 @@ namespace cps::sph {
 constexpr int kMaxProbes = 64;  // probe points per scene
 constexpr int kTagFluid = 0, kTagWall = 1;
 
+// time integration
+constexpr int kVerlet = 0;           // Verlet (Monaghan 1994; DualSPHysics's default), one pair pass a step
+constexpr int kSymplecticEuler = 1;  // v += a dt, x += v dt, rho += drho dt (needs a small CFL: the
+                                     // explicit density-velocity coupling grows acoustic modes)
+
 constexpr int kArtificialViscosity = 0;  // Monaghan 1992
 constexpr int kLaminarViscosity = 1;     // Lo & Shao 2002 (DualSPHysics's "laminar")
 
@@ -48,6 +53,8 @@ struct Model {
   LaminarViscosity lv;
   DensityDiffusion dd;
   float cfl, dt_min, dt_max;
+  int integrator;           // kVerlet / kSymplecticEuler
+  int verlet_steps;         // Verlet: an Euler step every this many steps (DualSPHysics: 40)
   Vec<D> gravity;
   Vec<D> lo, hi;            // the box the fluid is held in (the walls' inner faces)
   Vec<D> domain_lo, domain_hi;  // the box with its wall layers (the cell grid's domain)
@@ -133,7 +140,9 @@ struct Scene {
 template <int D>
 struct Arrays {
   Vec<D> *pos, *vel, *pos_alt, *vel_alt;
+  Vec<D> *velm, *velm_alt;  // the previous step's velocity (Verlet)
   float *rho, *rho_alt;
+  float *rhom, *rhom_alt;   // the previous step's density (Verlet)
   int *id, *id_alt;
   float* prs;        // pressure of the sorted state (from rho by Tait)
   Vec<D>* acc;       // dv/dt (fluid; zero for walls)

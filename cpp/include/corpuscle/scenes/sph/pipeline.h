@@ -76,7 +76,7 @@ class Pipeline {
 
   static double bytes_needed(const ModelT& m) {
     const double n = double(m.n_fluid) + double(m.n_wall);
-    const double per = 2 * (2 * sizeof(Vec<D>) + sizeof(float) + sizeof(int)) + sizeof(float) + sizeof(Vec<D>) +
+    const double per = 2 * (3 * sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int)) + sizeof(float) + sizeof(Vec<D>) +
                        sizeof(float) + sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
                        (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
@@ -95,7 +95,9 @@ class Pipeline {
     for (int p = 0; p < 2; ++p) {
       pos_[p].resize(n_);
       vel_[p].resize(n_);
+      velm_[p].resize(n_);
       rho_[p].resize(n_);
+      rhom_[p].resize(n_);
       id_[p].resize(n_);
     }
     prs_.resize(n_);
@@ -210,11 +212,16 @@ class Pipeline {
         // the walls never move: their velocity is zero
         std::vector<Vec<D>> zero(count, Vec<D>::zero());
         ex_.to_device(vel_[cur].data() + off, zero.data(), count * sizeof(Vec<D>));
+        ex_.to_device(velm_[cur].data() + off, zero.data(), count * sizeof(Vec<D>));
       }
-    } else if (name == "velocity") {
-      ex_.to_device(vel_[cur].data(), src, count * sizeof(Vec<D>));
-    } else if (name == "density" || name == "wall_density") {
-      ex_.to_device(rho_[cur].data() + off, src, count * sizeof(float));
+    } else if (name == "velocity" || name == "velocity_prev") {
+      // a velocity set is also the previous step's (a checkpoint's velocity_prev comes after)
+      if (name == "velocity") ex_.to_device(vel_[cur].data(), src, count * sizeof(Vec<D>));
+      ex_.to_device(velm_[cur].data(), src, count * sizeof(Vec<D>));
+    } else if (name == "density" || name == "wall_density" || name == "density_prev" || name == "wall_density_prev") {
+      const bool prev = name.find("_prev") != std::string::npos;
+      if (!prev) ex_.to_device(rho_[cur].data() + off, src, count * sizeof(float));
+      ex_.to_device(rhom_[cur].data() + off, src, count * sizeof(float));
     } else if (name == "id") {
       ex_.to_device(id_[cur].data(), src, count * sizeof(int));
     } else {
@@ -243,6 +250,10 @@ class Pipeline {
     a.vel_alt = vel_[nxt].data();
     a.rho = rho_[cur].data();
     a.rho_alt = rho_[nxt].data();
+    a.velm = velm_[cur].data();
+    a.velm_alt = velm_[nxt].data();
+    a.rhom = rhom_[cur].data();
+    a.rhom_alt = rhom_[nxt].data();
     a.id = id_[cur].data();
     a.id_alt = id_[nxt].data();
     a.prs = prs_.data();
@@ -259,8 +270,8 @@ class Pipeline {
   CellGrid<D, Exec> grid_;
   CompactGrid<D, Exec, kChunk> compact_;
   Buf<ModelT> model_;
-  Buf<Vec<D>> pos_[2], vel_[2];
-  Buf<float> rho_[2];
+  Buf<Vec<D>> pos_[2], vel_[2], velm_[2];
+  Buf<float> rho_[2], rhom_[2];
   Buf<int> id_[2];
   Buf<float> prs_, drho_;
   Buf<Vec<D>> acc_;

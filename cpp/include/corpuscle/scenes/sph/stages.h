@@ -26,6 +26,8 @@ struct ReorderStage {
     const int o = order[j];
     a.pos_alt[j] = a.pos[o];
     a.vel_alt[j] = a.vel[o];
+    a.velm_alt[j] = a.velm[o];
+    a.rhom_alt[j] = a.rhom[o];
     const float rho = a.rho[o];
     a.rho_alt[j] = rho;
     a.id_alt[j] = a.id[o];
@@ -184,8 +186,12 @@ struct FinalizeStage {
   }
 };
 
-// stage 5: symplectic Euler (v += a dt, x += v dt, rho += drho dt); the walls' density only,
-// never below rho0 (DBC); fluid outside the box is counted
+// stage 5: the Verlet scheme (Monaghan 1994; DualSPHysics's default, Crespo et al. 2015, eqs. 17-19)
+//   v^{n+1} = v^{n-1} + 2 dt a^n,  x^{n+1} = x^n + dt v^n + dt^2 a^n / 2,  rho^{n+1} = rho^{n-1} + 2 dt drho^n
+// with an Euler step (v^{n+1} = v^n + dt a^n, rho^{n+1} = rho^n + dt drho^n) every verlet_steps
+// steps, which keeps the two interleaved solutions together; or symplectic Euler (v += a dt,
+// x += v dt, rho += drho dt). Walls: their density only, never below rho0 (DBC). Fluid outside
+// the box is counted.
 template <int D>
 struct IntegrateStage {
   const Model<D>* model;
@@ -196,13 +202,26 @@ struct IntegrateStage {
     const float dt = g->step_dt;
     if (!(dt > 0.0f)) return;  // a step not taken leaves the particles as they are
     const Model<D>& m = *model;
-    float rho = a.rho[i] + a.drho[i] * dt;
+    // the step counter is already this step's (finalize advanced it): steps 1, 1 + N, ... are Euler
+    const bool euler = m.integrator == kSymplecticEuler || (g->clock.step - 1) % m.verlet_steps == 0;
+    const float rho0 = a.rho[i], rhom = a.rhom[i];
+    float rho = euler ? rho0 + a.drho[i] * dt : rhom + 2.0f * dt * a.drho[i];
     if (i >= nf) {
+      a.rhom[i] = rho0;
       a.rho[i] = rho < m.rho0 ? m.rho0 : rho;
       return;
     }
-    const Vec<D> v = a.vel[i] + a.acc[i] * dt;
-    const Vec<D> x = a.pos[i] + v * dt;
+    const Vec<D> v0 = a.vel[i], acc = a.acc[i];
+    Vec<D> v, x;
+    if (m.integrator == kSymplecticEuler) {
+      v = v0 + acc * dt;
+      x = a.pos[i] + v * dt;
+    } else {
+      v = euler ? v0 + acc * dt : a.velm[i] + acc * (2.0f * dt);
+      x = a.pos[i] + v0 * dt + acc * (0.5f * dt * dt);
+    }
+    a.velm[i] = v0;
+    a.rhom[i] = rho0;
     a.vel[i] = v;
     a.pos[i] = x;
     a.rho[i] = rho;

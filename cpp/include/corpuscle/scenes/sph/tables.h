@@ -10,11 +10,14 @@
   X(velocity, float, D, "fluid", true, true, vel_[cur].data(), nf)                 \
   X(density, float, 1, "fluid", true, true, rho_[cur].data(), nf)                  \
   X(id, int, 1, "fluid", true, false, id_[cur].data(), nf)                         \
+  X(velocity_prev, float, D, "fluid", true, false, velm_[cur].data(), nf)          \
+  X(density_prev, float, 1, "fluid", true, false, rhom_[cur].data(), nf)           \
   X(pressure, float, 1, "fluid", false, false, prs_.data(), nf)                    \
   X(acceleration, float, D, "fluid", false, false, acc_.data(), nf)                \
   X(density_rate, float, 1, "fluid", false, false, drho_.data(), nf)               \
   X(wall_position, float, D, "wall", true, true, pos_[cur].data() + nf, nw)        \
   X(wall_density, float, 1, "wall", true, true, rho_[cur].data() + nf, nw)         \
+  X(wall_density_prev, float, 1, "wall", true, false, rhom_[cur].data() + nf, nw)  \
   X(wall_pressure, float, 1, "wall", false, false, prs_.data() + nf, nw)
 
 // X(name, C type, count, member of Scene, checkpointed)
