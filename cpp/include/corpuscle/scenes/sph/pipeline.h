@@ -128,7 +128,7 @@ class Pipeline {
     r.step_dt = 0.0f;
   }
 
-  long long particles() const { return n_; }
+  long long particles() const { return nf_; }  // the fluid (the walls: n_wall in derived())
   int scenes() const { return 1; }
   template <class R>
   bool recover(std::vector<R>&, double) { return false; }
