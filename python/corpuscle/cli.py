@@ -932,9 +932,14 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", metavar="SCENE|FILE.toml", help="a built-in scene name or a scene file")
     p.add_argument("--backend", nargs="+", choices=BACKENDS, metavar="B",
                    help="backends to time: serial, cpu, cuda (default: every usable one)")
-    p.add_argument("--particles", metavar="N", help=_particles_help())
+    p.add_argument("--particles", metavar="N", nargs="+",
+                   help=_particles_help() + "; several values: a sweep over them")
     p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override any scene key (repeatable)")
-    _add_engine_options(p)
+    p.add_argument("--neighbors", metavar="INDEX", nargs="+",
+                   help="neighbour search(es) to time (the kind's indexes, see `corpuscle info`; several: a sweep)")
+    p.add_argument("--device", metavar="N", default="0", help="CUDA device number (default: 0)")
+    p.add_argument("--stages", action="store_true",
+                   help="per-stage times on the CPU backends too (CUDA always reports them, timed with events)")
     p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
     p.add_argument("--repeats", metavar="R", default="5", help="timed repeats; the median is reported (default: 5)")
     p.add_argument("--warmup", metavar="W", default="20", help="untimed warm-up steps (default: 20)")
@@ -950,8 +955,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     repeats = _int_option("--repeats", args.repeats, minimum=1)
     warmup = _int_option("--warmup", args.warmup, minimum=0)
     args.device = _int_option("--device", args.device, minimum=0)
-    args.particles = _int_option("--particles", args.particles)
-    scene = _load_with_options(args, {})
+    sizes = [_int_option("--particles", v, minimum=1) for v in args.particles] if args.particles else [None]
+    indexes = list(dict.fromkeys(args.neighbors)) if args.neighbors else [None]
+    scenes = []
+    for size in sizes:
+        args.particles = size
+        scenes.append(_load_with_options(args, {}))
+    scene = scenes[0]
     if args.json:
         parent = pathlib.Path(args.json).parent
         if not parent.is_dir():
@@ -969,14 +979,16 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if _progress_enabled(argparse.Namespace(no_progress=args.no_progress)):
         from tqdm import tqdm
 
-        bar = tqdm(total=len(backends) * repeats, unit="repeat", file=sys.stderr, leave=False)
+        bar = tqdm(total=len(backends) * repeats * len(scenes) * len(indexes), unit="repeat", file=sys.stderr,
+                   leave=False)
     rows: list[dict[str, Any]] = []
+    runs = [(sc, idx, b) for sc in scenes for idx in indexes for b in backends]
     try:
-        for backend in backends:
+        for scene, index, backend in runs:
             if bar is not None:
                 bar.set_description(backend)
             t_init = time.perf_counter()
-            sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
+            sim = Simulation.from_scene(scene, backend=backend, neighbors=index, device=args.device)
             init_seconds = time.perf_counter() - t_init
             if warmup:
                 sim.step(warmup)
@@ -1005,7 +1017,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "version": __version__,
                 "command": _command_line(args),
             }
-            if backend == "cuda":
+            state = sim.state()
+            if "mean_neighbors" in state:
+                row["mean_neighbors"] = float(state["mean_neighbors"])
+            if "n_wall" in sim.info:
+                row["wall_particles"] = int(sim.info["n_wall"])
+            if backend == "cuda" or args.stages:
                 row["stages"] = {str(k): float(v) for k, v in dict(sim.stage_times(steps)).items()}
             rows.append(row)
             del sim
@@ -1027,23 +1044,39 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def _print_bench(rows: list[dict[str, Any]]) -> None:
     """The benchmark table, then the per-stage table of each backend that has one."""
+    def base(r, backend):
+        return next((q for q in rows if q["backend"] == backend and q["particles"] == r["particles"]
+                     and q.get("neighbors") == r.get("neighbors")), None)
+
     serial = next((r for r in rows if r["backend"] == "serial"), None)
+    sweep = len({(r["particles"], r.get("neighbors")) for r in rows}) > 1
+    nbr = any("mean_neighbors" in r for r in rows)
     head = f"{'backend':<8} {'particles':>10} {'init(s)':>8} {'steps/s':>12} {'particle-steps/s':>18}"
+    if sweep or nbr:
+        head = f"{'index':<9}" + head + f" {'neighbours':>10}"
     print(head + (f" {'speedup':>9}" if serial else ""))
     for r in rows:
+        if sweep or nbr:
+            serial = base(r, "serial")
+            print(f"{str(r.get('neighbors')):<9}", end="")
         init = r.get("init_seconds")
         init_text = f"{init:8.3f}" if isinstance(init, (int, float)) else f"{'':>8}"
         line = (f"{r['backend']:<8} {r['particles']:>10,} {init_text} {_fmt_rate(r['steps_per_second']):>12} "
                 f"{_fmt_rate(r['particle_steps_per_second']):>18}")
+        if sweep or nbr:
+            mn = r.get("mean_neighbors")
+            line += f" {mn:10.1f}" if isinstance(mn, (int, float)) else f" {'':>10}"
         if serial:
             line += f" {r['steps_per_second'] / serial['steps_per_second']:>8.1f}x"
+        elif sweep or nbr:
+            line += f" {'':>9}"
         print(line)
     for r in rows:
         stages = r.get("stages")
         if not stages:
             continue
         total = sum(stages.values())
-        print(f"\n{r['backend']} stages (ms per step, {r['device']})")
+        print(f"\n{r['backend']} {r.get('neighbors')} {r['particles']:,} stages (ms per step, {r['device']})")
         width = max(len(k) for k in stages)
         for name, ms in stages.items():
             share = 100.0 * ms / total if total > 0 else 0.0

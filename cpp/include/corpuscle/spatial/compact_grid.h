@@ -43,6 +43,9 @@ struct CompactGridView {
   const int* chunk_start = nullptr;  // ascending sorted slots
   const int* nchunks = nullptr;      // the count (device memory on CUDA)
   int max_chunks = 0;                // the launch's upper bound
+  // chunks of a tag >= split gather from tags [tag_begin, split) only (-1: every chunk from
+  // every tag): the SPH walls need the fluid's particles, not each other's
+  int split = -1;
 
   // the chunk's slots [s, e) (c < *nchunks)
   CPS_HD void chunk(int c, int& s, int& e) const {
@@ -85,7 +88,9 @@ struct CompactTiledGatherFn {
     }
     const uint64_t dx = uint64_t(g.spec.dims[0]);
     const uint64_t dxy = D == 3 ? dx * uint64_t(g.spec.dims[1]) : 0;
-    for (int tag = g.tag_begin; tag < g.tag_end; ++tag) {
+    int t1 = g.tag_end;
+    if (view.split >= 0 && g.spec.tag_of_key(g.keys[s0]) >= view.split) t1 = view.split < t1 ? view.split : t1;
+    for (int tag = g.tag_begin; tag < t1; ++tag) {
       const uint64_t tbase = uint64_t(tag) * g.spec.ncells;
       for (int z = lo[2]; z <= hi[2]; ++z) {
         for (int y = lo[1]; y <= hi[1]; ++y) {
@@ -142,8 +147,9 @@ class CompactGrid {
     max_chunks_ = int(bound < double(n) ? bound : double(n > 0 ? n : 1));
     grid_ = grid;
   }
-  CompactGridView<D, K> view(const CellGridView<D>& grid) const {
+  CompactGridView<D, K> view(const CellGridView<D>& grid, int split = -1) const {
     CompactGridView<D, K> v;
+    v.split = split;
     v.grid = grid;
     v.chunk_start = starts_.data();
     v.nchunks = count_.data();

@@ -158,9 +158,9 @@ class Pipeline {
       if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
       else gather_stage(ex_, av, st);
     } else if constexpr (std::is_same_v<Index, CompactIndex>) {
-      gather_stage_compact(ex_, compact_.view(gv), st);
+      gather_stage_compact(ex_, compact_.view(gv, kTagWall), st);
     } else {
-      gather_stage(ex_, gv, st);
+      ex_.for_each(n_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_});
     }
     ex_.mark(1);
     // 3. the probes of this state (the grid's walk; all pairs for that index)

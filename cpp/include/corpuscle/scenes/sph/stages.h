@@ -114,6 +114,22 @@ struct InteractStage {
   }
 };
 
+// the pair stage through the cell grid, one thread per particle (GatherStageFn of
+// spatial/index.h, except that a wall particle gathers from the fluid's cells only: wall-wall
+// pairs contribute nothing, so the sums and their order are those of the full walk)
+template <int D, class Stage>
+struct GridGatherFn {
+  CellGridView<D> view;
+  Stage stage;
+  int nf;
+  CPS_HD void operator()(int i) const {
+    auto acc = stage.begin(i);
+    const CellGridView<D> v = i < nf ? view : view.tags(kTagFluid, kTagFluid + 1);
+    v.gather(i, v.position(i), [&](int j, const Vec<D>& d, float r2) { stage.visit(acc, i, j, d, r2); });
+    stage.end(i, acc);
+  }
+};
+
 // stage 3 (one thread per probe): pressure and velocity at the probe points by kernel
 // interpolation over the fluid with Shepard's normalisation,
 //   f(x) = sum_j f_j W(x - x_j) V_j / sum_j W(x - x_j) V_j,  V_j = m_j / rho_j
