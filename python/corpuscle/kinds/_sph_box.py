@@ -166,7 +166,10 @@ class SphBox(Kind):
         gamma = float(v["fluid.gamma"])
         g = float(v["fluid.gravity"])
         height = float((f1[-1] - f0[-1]) * dp)
-        c0 = float(v["fluid.sound_speed"]) or float(v["fluid.sound_factor"]) * math.sqrt(2.0 * max(g, 1e-12) * height)
+        if g <= 0.0 and float(v["fluid.sound_speed"]) <= 0.0:
+            raise SceneError("fluid.gravity = 0 needs fluid.sound_speed > 0 (c0 is otherwise taken from the "
+                             "free-fall speed sqrt(2 g H))")
+        c0 = float(v["fluid.sound_speed"]) or float(v["fluid.sound_factor"]) * math.sqrt(2.0 * g * height)
         B = c0 * c0 * rho0 / gamma
         box_hi = nb * dp
         probes = [p["position"] for p in scene.arrays.get("probes", [])]

@@ -152,7 +152,7 @@ class Pipeline {
     if constexpr (std::is_same_v<Index, CompactIndex>) compact_.build(ex_, gv);
     ex_.mark(0);
     // 2. the pair sums through the index
-    InteractStage<D> st{md, u_, s, m_.kernels.gradient, nf_};
+    InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
     if constexpr (std::is_same_v<Index, AllPairsIndex>) {
       AllPairsView<D> av{s.pos, n_, m_.h * m_.h};
       if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);

@@ -42,12 +42,27 @@ struct ReorderStage {
 //   wall i:   drho_i/dt = sum_{fluid j} m_j v_ij . grad_i W_ij (DBC: Crespo et al. 2007), no motion
 // Wall-wall pairs contribute nothing (neither moves). The per-particle items of the step's
 // reductions are written here.
+// the constants of the pair terms, copied out of the model (kernel parameters on CUDA: no
+// load through the model's pointer per pair)
+template <int D>
+struct PairConsts {
+  SphKernel<D> kern;  // the gradient kernel
+  float mass, hs, c0;
+  int viscosity;
+  ArtificialViscosity av;
+  LaminarViscosity lv;
+  DensityDiffusion dd;
+  Vec<D> gravity;
+  static PairConsts make(const Model<D>& m) {
+    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.viscosity, m.av, m.lv, m.dd, m.gravity};
+  }
+};
+
 template <int D>
 struct InteractStage {
-  const Model<D>* model;
+  PairConsts<D> m;
   const Control* ctl;
   Arrays<D> a;
-  SphKernel<D> kern;  // the gradient kernel (a copy: no pointer chase per pair)
   int nf;
 
   struct Acc {
@@ -70,9 +85,8 @@ struct InteractStage {
     if (j == i) return;
     const bool fi = i < nf, fj = j < nf;
     if (!fi && !fj) return;
-    const Model<D>& m = *model;
     const float r = fsqrt(r2);
-    const Vec<D> gw = kern.grad(d, r);
+    const Vec<D> gw = m.kern.grad(d, r);
     const Vec<D> dv = a.vel[i] - a.vel[j];
     s.drho += m.mass * dot(dv, gw);
     if (!fi) return;
@@ -90,7 +104,6 @@ struct InteractStage {
   }
 
   CPS_HD void end(int i, Acc& s) const {
-    const Model<D>& m = *model;
     StepSums it = StepSums::identity();
     it.p_max = a.prs[i];
     if (i < nf) {
