@@ -10,7 +10,7 @@ import numpy as np
 from ..scene import KeySpec, SceneError
 from ._sph_box import SphBox, common_keys, make_schema
 
-KEYS = common_keys(3, end_time=1.0, record_every=100, smoothing=1.3, alpha=0.05)
+KEYS = common_keys(3, end_time=0.5, record_every=100, smoothing=1.3, alpha=0.05)
 KEYS.update({
     "box.size": KeySpec("vec3", [1.0, 1.0, 1.0], "m", 0.0, 1e4, "the box's inner size (x, y, z; gravity along -z)",
                         lo_open=True),
@@ -31,7 +31,7 @@ class FluidBox(SphBox):
     dim = 3
     schema = make_schema("fluid-box", "a block of SPH fluid released in a closed box (seed 002)", KEYS, 3,
                          [_block_inside])
-    default_particles = {"cuda": 1_048_576, "cpu": 16_384, "serial": 16_384}
+    default_particles = {"cuda": 1_048_576, "cpu": 4096, "serial": 4096}
 
     def geometry(self, v):
         return (np.asarray(v["box.size"], dtype=np.float64), np.asarray(v["fluid.lo"], dtype=np.float64),
