@@ -10,7 +10,7 @@ import numpy as np
 from ..scene import KeySpec, SceneError
 from ._sph_box import SphBox, common_keys, make_schema
 
-KEYS = common_keys(3, end_time=0.5, record_every=100, smoothing=1.3, alpha=0.05)
+KEYS = common_keys(3, end_time=0.5, record_every=100, smoothing=1.732, alpha=0.05)
 KEYS.update({
     "box.size": KeySpec("vec3", [1.0, 1.0, 1.0], "m", 0.0, 1e4, "the box's inner size (x, y, z; gravity along -z)",
                         lo_open=True),
