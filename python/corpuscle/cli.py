@@ -326,7 +326,9 @@ def _add_engine_options(p: argparse.ArgumentParser) -> None:
     """--neighbors and --device: how the engine runs a scene (not part of the scene)."""
     p.add_argument("--neighbors", metavar="INDEX",
                    help="neighbour search: lists (cells on rebuilds, lists with a skin reused in between; the "
-                        "default), grid (the cells every step) or allpairs (every pair: O(N^2), a reference)")
+                        "8-ball's default), grid (the cells every step; the SPH box's default), compact (the SPH "
+                        "box's cells in chunks of <= 32 through shared memory) or allpairs (every pair: O(N^2), a "
+                        "reference); `corpuscle scenes --keys` lists each kind's")
     p.add_argument("--device", metavar="N", default="0", help="CUDA device number (default: 0)")
 
 
