@@ -49,7 +49,7 @@ def test_the_8ball_schema_lives_in_its_kind_not_in_the_loader():
     assert kinds.get("magic8ball") is magic8ball.KIND
     assert magic8ball.KIND.particle_key == "fluid.particles"
     assert sc.KINDS["magic8ball"].arrays == {"shake": magic8ball.SHAKE_KEYS}
-    with pytest.raises(KeyError, match="unknown scene kind 'nosuch' \\(kinds: magic8ball"):
+    with pytest.raises(KeyError, match="unknown scene kind 'nosuch' \\(kinds: [a-z0-9, -]*magic8ball"):
         kinds.get("nosuch")
     assert kinds.find("nosuch") is None
 

@@ -326,7 +326,9 @@ def _add_engine_options(p: argparse.ArgumentParser) -> None:
     """--neighbors and --device: how the engine runs a scene (not part of the scene)."""
     p.add_argument("--neighbors", metavar="INDEX",
                    help="neighbour search: lists (cells on rebuilds, lists with a skin reused in between; the "
-                        "default), grid (the cells every step) or allpairs (every pair: O(N^2), a reference)")
+                        "8-ball's default), grid (the cells every step; the SPH box's default), compact (the SPH "
+                        "box's cells in chunks of <= 32 through shared memory) or allpairs (every pair: O(N^2), a "
+                        "reference); `corpuscle scenes --keys` lists each kind's")
     p.add_argument("--device", metavar="N", default="0", help="CUDA device number (default: 0)")
 
 
@@ -946,9 +948,14 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", metavar="SCENE|FILE.toml", help="a built-in scene name or a scene file")
     p.add_argument("--backend", nargs="+", choices=BACKENDS, metavar="B",
                    help="backends to time: serial, cpu, cuda (default: every usable one)")
-    p.add_argument("--particles", metavar="N", help=_particles_help())
+    p.add_argument("--particles", metavar="N", nargs="+",
+                   help=_particles_help() + "; several values: a sweep over them")
     p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override any scene key (repeatable)")
-    _add_engine_options(p)
+    p.add_argument("--neighbors", metavar="INDEX", nargs="+",
+                   help="neighbour search(es) to time (the kind's indexes, see `corpuscle info`; several: a sweep)")
+    p.add_argument("--device", metavar="N", default="0", help="CUDA device number (default: 0)")
+    p.add_argument("--stages", action="store_true",
+                   help="per-stage times on the CPU backends too (CUDA always reports them, timed with events)")
     p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
     p.add_argument("--repeats", metavar="R", default="5", help="timed repeats; the median is reported (default: 5)")
     p.add_argument("--warmup", metavar="W", default="20", help="untimed warm-up steps (default: 20)")
@@ -967,8 +974,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     repeats = _int_option("--repeats", args.repeats, minimum=1)
     warmup = _int_option("--warmup", args.warmup, minimum=0)
     args.device = _int_option("--device", args.device, minimum=0)
-    args.particles = _int_option("--particles", args.particles)
-    scene = _load_with_options(args, {})
+    sizes = [_int_option("--particles", v, minimum=1) for v in args.particles] if args.particles else [None]
+    indexes = list(dict.fromkeys(args.neighbors)) if args.neighbors else [None]
+    scenes = []
+    for size in sizes:
+        args.particles = size
+        scenes.append(_load_with_options(args, {}))
+    scene = scenes[0]
     batches = [_int_option("--batch", b, minimum=1) for b in args.batch] if args.batch else [None]
     if args.batch and scene.kind != "magic8ball":
         raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
@@ -989,20 +1001,22 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if _progress_enabled(argparse.Namespace(no_progress=args.no_progress)):
         from tqdm import tqdm
 
-        bar = tqdm(total=len(backends) * len(batches) * repeats, unit="repeat", file=sys.stderr, leave=False)
+        bar = tqdm(total=len(backends) * repeats * len(scenes) * len(indexes) * len(batches), unit="repeat",
+                   file=sys.stderr, leave=False)
     rows: list[dict[str, Any]] = []
+    runs = [(sc, idx, b, B) for sc in scenes for idx in indexes for b in backends for B in batches]
     try:
-        for backend, batch in ((b, B) for b in backends for B in batches):
+        for scene, index, backend, batch in runs:
             if bar is not None:
                 bar.set_description(backend if batch is None else f"{backend} B={batch}")
             t_init = time.perf_counter()
             if batch is None:
-                sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
+                sim = Simulation.from_scene(scene, backend=backend, neighbors=index, device=args.device)
             else:
                 from .batch import Batch
 
                 # no settling: the timing does not depend on it
-                sim = Batch.from_scene(scene, n=batch, backend=backend, neighbors=args.neighbors, device=args.device,
+                sim = Batch.from_scene(scene, n=batch, backend=backend, neighbors=index, device=args.device,
                                        settle=0.0)
             init_seconds = time.perf_counter() - t_init
             if warmup:
@@ -1034,7 +1048,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "version": __version__,
                 "command": _command_line(args),
             }
-            if backend == "cuda" and batch is None:
+            state = sim.state() if batch is None else {}
+            if "mean_neighbors" in state:
+                row["mean_neighbors"] = float(state["mean_neighbors"])
+            if batch is None and "n_wall" in sim.info:
+                row["wall_particles"] = int(sim.info["n_wall"])
+            if (backend == "cuda" or args.stages) and batch is None:
                 row["stages"] = {str(k): float(v) for k, v in dict(sim.stage_times(steps)).items()}
             rows.append(row)
             del sim
@@ -1056,27 +1075,43 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def _print_bench(rows: list[dict[str, Any]]) -> None:
     """The benchmark table, then the per-stage table of each backend that has one."""
+    def base(r, backend):
+        return next((q for q in rows if q["backend"] == backend and q["particles"] == r["particles"]
+                     and q.get("neighbors") == r.get("neighbors") and q.get("batch", 1) == r.get("batch", 1)), None)
+
     batched = any(r.get("batch", 1) != 1 for r in rows)
     serial = None if batched else next((r for r in rows if r["backend"] == "serial"), None)
+    sweep = len({(r["particles"], r.get("neighbors")) for r in rows}) > 1
+    nbr = any("mean_neighbors" in r for r in rows)
     head = f"{'backend':<8} " + (f"{'batch':>7} " if batched else "") + f"{'particles':>10} {'init(s)':>8} {'steps/s':>12} "
     head += (f"{'scene-steps/s':>14} " if batched else "") + f"{'particle-steps/s':>18}"
+    if sweep or nbr:
+        head = f"{'index':<9}" + head + f" {'neighbours':>10}"
     print(head + (f" {'speedup':>9}" if serial else ""))
     for r in rows:
+        if sweep or nbr:
+            serial = base(r, "serial")
+            print(f"{str(r.get('neighbors')):<9}", end="")
         init = r.get("init_seconds")
         init_text = f"{init:8.3f}" if isinstance(init, (int, float)) else f"{'':>8}"
         line = (f"{r['backend']:<8} " + (f"{r.get('batch', 1):>7,} " if batched else "") +
                 f"{r['particles']:>10,} {init_text} {_fmt_rate(r['steps_per_second']):>12} " +
                 (f"{_fmt_rate(r['scene_steps_per_second']):>14} " if batched else "") +
                 f"{_fmt_rate(r['particle_steps_per_second']):>18}")
+        if sweep or nbr:
+            mn = r.get("mean_neighbors")
+            line += f" {mn:10.1f}" if isinstance(mn, (int, float)) else f" {'':>10}"
         if serial:
             line += f" {r['steps_per_second'] / serial['steps_per_second']:>8.1f}x"
+        elif sweep or nbr:
+            line += f" {'':>9}"
         print(line)
     for r in rows:
         stages = r.get("stages")
         if not stages:
             continue
         total = sum(stages.values())
-        print(f"\n{r['backend']} stages (ms per step, {r['device']})")
+        print(f"\n{r['backend']} {r.get('neighbors')} {r['particles']:,} stages (ms per step, {r['device']})")
         width = max(len(k) for k in stages)
         for name, ms in stages.items():
             share = 100.0 * ms / total if total > 0 else 0.0
@@ -1085,6 +1120,49 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
 
 
 register(Command("bench", "time steps per second on each backend", _configure_bench, _cmd_bench))
+
+
+# ---------------------------------------------------------------------------
+# corpuscle validate
+# ---------------------------------------------------------------------------
+
+
+def _configure_validate(p: argparse.ArgumentParser) -> None:
+    from . import validation
+
+    p.add_argument("name", metavar="NAME", help=f"what to validate: {', '.join(validation.VALIDATIONS)}")
+    p.add_argument("--json", action="store_true", help="print the checks as JSON (after the table)")
+    # each validation's own options; those of the one named are parsed in _cmd_validate
+    p.add_argument("options", nargs=argparse.REMAINDER, help="the validation's options (NAME --help lists them)")
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from . import validation
+
+    module = validation.load(args.name)  # unknown name: ValueError, one line, exit 2
+    sub = _Parser(prog=f"{PROG} validate {args.name}", description=(module.__doc__ or "").strip().splitlines()[0])
+    sub.add_argument("--json", action="store_true", help="print the checks as JSON (after the table)")
+    module.add_arguments(sub)
+    opts = sub.parse_args(args.options)  # bad options exit 2 with one line
+    want_json = bool(args.json or opts.json)
+    checks = module.run(opts)
+    print()
+    rows = [(c.name, f"{c.measured:.6g}", f"{c.reference:.6g}", f"{c.measured - c.reference:+.4g}",
+             f"{c.tolerance:.4g}" + (f" {c.unit}" if c.unit else ""), "PASS" if c.passed else "FAIL") for c in checks]
+    head = ("check", "measured", "reference", "difference", "tolerance", "")
+    widths = [max(len(str(r[k])) for r in [head, *rows]) for k in range(6)]
+    print("  ".join(str(h).ljust(w) if k == 0 else str(h).rjust(w) for k, (h, w) in enumerate(zip(head, widths))))
+    for r in rows:
+        print("  ".join(str(x).ljust(w) if k == 0 else str(x).rjust(w) for k, (x, w) in enumerate(zip(r, widths))))
+    ok = all(c.passed for c in checks) and bool(checks)
+    if want_json:
+        print(json.dumps(validation.as_dicts(checks), indent=2, default=_json_default))
+    print("PASS" if ok else "FAIL")
+    return EXIT_OK if ok else 1
+
+
+register(Command("validate", "run a validation case and check it against its reference (PASS/FAIL)",
+                 _configure_validate, _cmd_validate))
 
 
 def _register_viz() -> None:

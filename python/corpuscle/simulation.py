@@ -304,6 +304,8 @@ class Simulation:
         arrays = {}
         for f in fields:
             name, comps = f["name"], int(f["components"])
+            # a field of another group (the SPH box's walls) has its own count
+            n = self.n_particles if f.get("group", "fluid") == "fluid" else int(self.core.download(name).shape[0])
             if f["dtype"][1] == "f":
                 arrays[name] = _particle_array(f"checkpoint {name}", state[name], n, comps,
                                                dtype=np.dtype(f["dtype"]))

@@ -1,6 +1,7 @@
 // Every kind on the CPU backends (serial and OpenMP): the shared pipelines over CpuExec.
 #include "corpuscle/scenes/magic8ball/build.h"
 #include "corpuscle/scenes/wind_tunnel/build.h"
+#include "corpuscle/scenes/sph/build.h"
 #include "corpuscle/sim/registry.h"
 #include "cpu/exec_cpu.h"
 
@@ -11,6 +12,7 @@ std::unique_ptr<Sim> make_sim_cpu(const SimRequest& r, bool parallel) {
   ex.parallel = parallel;
   if (r.kind == "magic8ball") return m8::make(std::move(ex), r);
   if (r.kind == "wind-tunnel") return wt::make(std::move(ex), r);
+  if (sph::is_kind(r.kind)) return sph::make_kind(std::move(ex), r);
   throw Error("unknown scene kind '" + r.kind + "'");
 }
 

@@ -2,6 +2,7 @@
 #include "corpuscle/core/devices.h"
 #include "corpuscle/scenes/magic8ball/build.h"
 #include "corpuscle/scenes/wind_tunnel/build.h"
+#include "corpuscle/scenes/sph/build.h"
 #include "corpuscle/sim/registry.h"
 #include "cuda/exec_cuda.cuh"
 
@@ -46,6 +47,7 @@ std::unique_ptr<Sim> make_sim_cuda(const SimRequest& r) {
   use_device(r.device);
   if (r.kind == "magic8ball") return m8::make(CudaExec(), r);
   if (r.kind == "wind-tunnel") return wt::make(CudaExec(), r);
+  if (sph::is_kind(r.kind)) return sph::make_kind(CudaExec(), r);
   throw Error("unknown scene kind '" + r.kind + "'");
 }
 

@@ -10,6 +10,7 @@
 #include "corpuscle/core/error.h"
 #include "corpuscle/scenes/magic8ball/build.h"
 #include "corpuscle/scenes/wind_tunnel/build.h"
+#include "corpuscle/scenes/sph/build.h"
 #include "cpu/exec_cpu.h"
 
 namespace cps {
@@ -21,7 +22,10 @@ Vec3 ParamSource::vec3(const std::string& key) const {
 }
 
 const std::vector<KindInfo>& kinds() {
-  static const std::vector<KindInfo> k = {{"magic8ball", m8::index_names()}, {"wind-tunnel", wt::index_names()}};
+  static const std::vector<KindInfo> k = {{"magic8ball", m8::index_names()}, {"wind-tunnel", wt::index_names()},
+                                              {"fluid-box", sph::index_names()},
+                                              {"dam-break", sph::index_names()},
+                                              {"dam-break-2d", sph::index_names()}};
   return k;
 }
 
@@ -49,6 +53,7 @@ std::unique_ptr<Sim> make_sim(const SimRequest& r) {
 double bytes_needed(const SimRequest& r) {
   kind_of(r);
   if (r.kind == "wind-tunnel") return wt::bytes<CpuExec>(r);
+  if (sph::is_kind(r.kind)) return sph::bytes<CpuExec>(r);
   return m8::bytes<CpuExec>(r);
 }
 

@@ -1,0 +1,138 @@
+"""The fluid-box sweep of issue 9 (seed 002's tables): particles in powers of 4 from 128
+(to 4,194,304 on the GPU) x {serial allpairs, serial grid, OpenMP grid, CUDA allpairs, CUDA
+grid, CUDA compact}, through `corpuscle bench --json`, with the mean neighbour count and the
+per-stage times (CUDA events) beside every figure; then the seed's speedup tables (over
+serial and over OpenMP) and a PNG plot. All-pairs rows stop where one step would take longer
+than --max-step seconds (O(N^2)).
+
+    python benchmarks/fluid_box_sweep.py --out bench-out            # every backend found
+    python benchmarks/fluid_box_sweep.py --out bench-out --cpu-only --max-particles 32768
+
+Writes OUT/fluid_box_sweep.json (every row), OUT/fluid_box_sweep.md (tables) and
+OUT/fluid_box_sweep.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import subprocess
+import sys
+
+CONFIGS = [("serial", "allpairs"), ("serial", "grid"), ("cpu", "grid"),
+           ("cuda", "allpairs"), ("cuda", "grid"), ("cuda", "compact")]
+
+
+def bench(scene, backend, index, n, steps, repeats, out, extra):
+    path = out / f"row_{backend}_{index}_{n}.json"
+    cmd = [sys.executable, "-m", "corpuscle", "bench", scene, "--backend", backend, "--neighbors", index,
+           "--particles", str(n), "--steps", str(steps), "--repeats", str(repeats), "--warmup", "5",
+           "--json", str(path), "--no-progress", *extra]
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    if p.returncode != 0:
+        print(f"  {backend} {index} {n}: failed: {p.stderr.strip()[-300:]}", flush=True)
+        return None
+    return json.loads(path.read_text())[0]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="fluid-box-sweep", help="output folder")
+    ap.add_argument("--scene", default="fluid-box")
+    ap.add_argument("--cpu-only", action="store_true")
+    ap.add_argument("--max-particles", type=int, default=4_194_304)
+    ap.add_argument("--max-step", type=float, default=2.0, help="skip sizes past a step of this many seconds")
+    ap.add_argument("--stages", action="store_true", help="per-stage times on the CPU as well")
+    args = ap.parse_args()
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    sizes = [128 * 4 ** k for k in range(12) if 128 * 4 ** k <= args.max_particles]
+    rows = []
+    for backend, index in CONFIGS:
+        if args.cpu_only and backend == "cuda":
+            continue
+        for n in sizes:
+            if backend != "cuda" and n > 1_048_576:
+                break
+            # a handful of steps for the big / slow ones, more for the quick ones
+            prev = [r for r in rows if r["backend"] == backend and r["neighbors"] == index]
+            step_s = 1.0 / prev[-1]["steps_per_second"] if prev else 0.0
+            if prev and step_s * 4 * (4 if index == "allpairs" else 1) > args.max_step:
+                break
+            steps = 200 if backend == "cuda" else (50 if step_s < 0.005 else 10)
+            extra = ["--stages"] if args.stages and backend != "cuda" else []
+            r = bench(args.scene, backend, index, n, steps, 3, out, extra)
+            if r is None:
+                break
+            rows.append(r)
+            print(f"{backend:7} {index:9} {r['particles']:>9,} fluid + {r.get('wall_particles', 0):>9,} wall  "
+                  f"{r['steps_per_second']:10.1f} steps/s  {r['particle_steps_per_second']:.3g} p-steps/s  "
+                  f"{r.get('mean_neighbors', float('nan')):6.1f} nbrs", flush=True)
+    (out / "fluid_box_sweep.json").write_text(json.dumps(rows, indent=2) + "\n")
+    tables(rows, out / "fluid_box_sweep.md")
+    plot(rows, out / "fluid_box_sweep.png")
+    return 0
+
+
+def tables(rows, path):
+    sizes = sorted({r["fluid_target"] if "fluid_target" in r else r["particles"] for r in rows})
+    cols = [(b, i) for b, i in CONFIGS if any(r["backend"] == b and r["neighbors"] == i for r in rows)]
+
+    def get(b, i, n):
+        return next((r for r in rows if r["backend"] == b and r["neighbors"] == i and r["particles"] == n), None)
+
+    lines = ["| fluid particles | neighbours | " + " | ".join(f"{b} {i} (steps/s)" for b, i in cols) + " |",
+             "|---:|---:|" + "---:|" * len(cols)]
+    for n in sizes:
+        nb = next((r.get("mean_neighbors") for r in rows if r["particles"] == n and r.get("mean_neighbors")), None)
+        cells = []
+        for b, i in cols:
+            r = get(b, i, n)
+            cells.append(f"{r['steps_per_second']:.4g}" if r else "")
+        lines.append(f"| {n:,} | {nb:.0f} | " + " | ".join(cells) + " |" if nb else f"| {n:,} | | " + " | ".join(cells) + " |")
+    for ref_b, ref_i, title in (("serial", "grid", "speedup over serial grid"), ("cpu", "grid", "speedup over OpenMP grid")):
+        lines += ["", f"{title}:", "", "| fluid particles | " + " | ".join(f"{b} {i}" for b, i in cols) + " |",
+                  "|---:|" + "---:|" * len(cols)]
+        for n in sizes:
+            base = get(ref_b, ref_i, n)
+            if not base:
+                continue
+            cells = []
+            for b, i in cols:
+                r = get(b, i, n)
+                cells.append(f"{r['steps_per_second'] / base['steps_per_second']:.3g}x" if r else "")
+            lines.append(f"| {n:,} | " + " | ".join(cells) + " |")
+    stage_rows = [r for r in rows if r.get("stages")]
+    if stage_rows:
+        lines += ["", "stages (ms per step):", ""]
+        for r in stage_rows:
+            lines.append(f"- {r['backend']} {r['neighbors']} {r['particles']:,}: " +
+                         ", ".join(f"{k} {v:.4g}" for k, v in r["stages"].items()))
+    path.write_text("\n".join(lines) + "\n")
+    print(path.read_text())
+
+
+def plot(rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for b, i in CONFIGS:
+        rs = sorted((r for r in rows if r["backend"] == b and r["neighbors"] == i), key=lambda r: r["particles"])
+        if rs:
+            ax.loglog([r["particles"] for r in rs], [r["particle_steps_per_second"] for r in rs], "-o", ms=3,
+                      label=f"{b} {i}")
+    ax.set_xlabel("fluid particles")
+    ax.set_ylabel("particle-steps per second")
+    ax.set_title("corpuscle fluid-box")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

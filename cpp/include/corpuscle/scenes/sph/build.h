@@ -1,0 +1,146 @@
+// The SPH box built from its parameters (SI values, as python/corpuscle/kinds/sph_box.py
+// writes them) and made on an Exec with an index plug-in.
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "corpuscle/core/error.h"
+#include "corpuscle/sim/params.h"
+#include "corpuscle/sim/sim_impl.h"
+#include "corpuscle/scenes/sph/pipeline.h"
+
+namespace cps::sph {
+
+template <int D>
+inline Vec<D> vecd(const ParamSource& p, const std::string& key, const char* kind) {
+  auto v = p.numbers(key);
+  if (int(v.size()) != D) throw Error(std::string(kind) + ": parameter '" + key + "' needs " + std::to_string(D) + " numbers");
+  Vec<D> r;
+  for (int k = 0; k < D; ++k) r[k] = float(v[k]);
+  return r;
+}
+
+template <class KindT>
+inline Model<KindT::D> build_model(const ParamSource& p) {
+  constexpr int D = KindT::D;
+  const char* kind = KindT::name;
+  Model<D> m{};
+  m.n_fluid = int(p.integer("n_fluid"));
+  m.n_wall = int(p.integer("n_wall"));
+  if (m.n_fluid <= 0 || m.n_wall < 0) throw Error(std::string(kind) + ": n_fluid must be positive, n_wall >= 0");
+  const long long kernel = p.integer("kernel");
+  if (kernel < 0 || kernel >= kSphKernelKinds) throw Error(std::string(kind) + ": unknown kernel code " + std::to_string(kernel));
+  m.h = p.f("h");
+  m.hs = p.f("hs");
+  if (!(m.h > 0.0f) || !(m.hs > 0.0f)) throw Error(std::string(kind) + ": h and hs must be positive");
+  m.kernels = SphKernelSet<D>::make(SphKernelKind(kernel), m.h);
+  m.mass = p.f("mass");
+  m.rho0 = p.f("rho0");
+  m.c0 = p.f("c0");
+  m.gamma = p.f("gamma");
+  m.B = m.c0 * m.c0 * m.rho0 / m.gamma;
+  m.viscosity = int(p.integer("viscosity"));
+  if (m.viscosity != kArtificialViscosity && m.viscosity != kLaminarViscosity)
+    throw Error(std::string(kind) + ": viscosity must be 0 (artificial) or 1 (laminar)");
+  m.av = ArtificialViscosity::make(p.f("alpha"), p.f("beta"), m.hs);
+  m.lv = LaminarViscosity::make(p.f("nu"), m.hs);
+  const long long diffusion = p.integer("diffusion");
+  const float delta = p.f("delta");
+  const Vec<D> g = vecd<D>(p, "gravity", kind);
+  const float gmag = norm(g);
+  if (diffusion == 0) m.dd = DensityDiffusion::none();
+  else if (diffusion == 1) m.dd = DensityDiffusion::molteni(delta, m.hs, m.c0);
+  else if (diffusion == 2) m.dd = DensityDiffusion::fourtakas(delta, m.hs, m.c0, m.rho0, m.gamma, gmag);
+  else throw Error(std::string(kind) + ": diffusion must be 0 (none), 1 (Molteni) or 2 (Fourtakas)");
+  m.cfl = p.f("cfl");
+  m.dt_min = p.f("dt_min");
+  m.dt_max = p.f("dt_max");
+  m.integrator = int(p.integer("integrator"));
+  m.verlet_steps = int(p.integer("verlet_steps"));
+  if (m.integrator != kVerlet && m.integrator != kSymplecticEuler)
+    throw Error(std::string(kind) + ": integrator must be 0 (Verlet) or 1 (symplectic Euler)");
+  if (m.verlet_steps < 1) throw Error(std::string(kind) + ": verlet_steps must be at least 1");
+  m.gravity = g;
+  m.lo = vecd<D>(p, "box_lo", kind);
+  m.hi = vecd<D>(p, "box_hi", kind);
+  m.domain_lo = vecd<D>(p, "domain_lo", kind);
+  m.domain_hi = vecd<D>(p, "domain_hi", kind);
+  auto probes = p.numbers("probes");
+  if (probes.size() % D != 0) throw Error(std::string(kind) + ": probes need " + std::to_string(D) + " numbers each");
+  m.n_probes = int(probes.size() / D);
+  if (m.n_probes > kMaxProbes)
+    throw Error(std::string(kind) + ": " + std::to_string(m.n_probes) + " probes, at most " + std::to_string(kMaxProbes));
+  for (size_t k = 0; k < probes.size(); ++k) m.probes[k] = float(probes[k]);
+  return m;
+}
+
+template <class Exec, class Index, class KindT>
+std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
+  using P = Pipeline<std::decay_t<Exec>, Index, KindT>;
+  constexpr int D = KindT::D;
+  const std::string kind = KindT::name;
+  auto m = std::make_unique<Model<D>>(build_model<KindT>(*r.params));
+  auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), *m,
+                                                              std::vector<Scene>{P::initial_record(*m)}, r.device);
+  struct Want {
+    const char* name;
+    int comps;
+    long long count;
+  };
+  const Want wants[] = {{"position", D, m->n_fluid},     {"velocity", D, m->n_fluid},
+                        {"density", 1, m->n_fluid},      {"wall_position", D, m->n_wall},
+                        {"wall_density", 1, m->n_wall}};
+  for (const Want& w : wants) {
+    if (!r.arrays || !r.arrays->has(w.name)) throw Error(kind + ": no initial " + w.name + " array");
+    ArrayView a = r.arrays->get(w.name);
+    if (a.components != w.comps || a.count != w.count)
+      throw Error(kind + ": the initial " + w.name + " array must be (" + std::to_string(w.count) + ", " +
+                  std::to_string(w.comps) + ")");
+    if (w.count > 0) sim->upload(w.name, a.data, a.count);
+  }
+  return sim;
+}
+
+inline const std::vector<std::string>& index_names() {
+  static const std::vector<std::string> names = {GridIndex::name, CompactIndex::name, AllPairsIndex::name};
+  return names;
+}
+
+template <class KindT, class Exec>
+std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
+  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
+  if (idx == GridIndex::name) return make_with<Exec, GridIndex, KindT>(std::move(ex), r);
+  if (idx == CompactIndex::name) return make_with<Exec, CompactIndex, KindT>(std::move(ex), r);
+  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex, KindT>(std::move(ex), r);
+  throw Error(std::string(KindT::name) + ": unknown index '" + idx + "' (indexes: grid, compact, allpairs)");
+}
+
+// any of the three kinds by name (null: not one of them)
+template <class Exec>
+std::unique_ptr<Sim> make_kind(Exec&& ex, const SimRequest& r) {
+  if (r.kind == FluidBoxKind::name) return make<FluidBoxKind>(std::move(ex), r);
+  if (r.kind == DamBreakKind::name) return make<DamBreakKind>(std::move(ex), r);
+  if (r.kind == DamBreak2Kind::name) return make<DamBreak2Kind>(std::move(ex), r);
+  return nullptr;
+}
+
+template <class KindT, class Exec>
+double bytes_of(const SimRequest& r) {
+  auto m = std::make_unique<Model<KindT::D>>(build_model<KindT>(*r.params));
+  if (r.index == CompactIndex::name) return Pipeline<Exec, CompactIndex, KindT>::bytes_needed(*m);
+  return Pipeline<Exec, GridIndex, KindT>::bytes_needed(*m);
+}
+
+template <class Exec>
+double bytes(const SimRequest& r) {
+  if (r.kind == DamBreak2Kind::name) return bytes_of<DamBreak2Kind, Exec>(r);
+  if (r.kind == DamBreakKind::name) return bytes_of<DamBreakKind, Exec>(r);
+  return bytes_of<FluidBoxKind, Exec>(r);
+}
+
+inline bool is_kind(const std::string& k) {
+  return k == FluidBoxKind::name || k == DamBreakKind::name || k == DamBreak2Kind::name;
+}
+
+}  // namespace cps::sph

@@ -1,0 +1,153 @@
+// Weakly compressible SPH in a closed box (seed 002's fluid box, and the Martin & Moyce dam
+// break): the kinds `fluid-box`, `dam-break` (3-D) and `dam-break-2d`, one model generic in
+// the dimension D.
+//
+// The model is DualSPHysics's (Crespo et al. 2015, Comput. Phys. Commun. 187; Dominguez et al.
+// 2022, Comput. Part. Mech. 9): the continuity equation for the density, Tait's equation of
+// state, the symmetric pressure gradient, Monaghan's artificial or the laminar viscosity,
+// optional delta-SPH density diffusion (physics/sph_pair_terms.h), the CFL time step of
+// physics/timestep.h (choose_dt_cfl) and the Verlet scheme (or symplectic Euler).
+//
+// Walls are dynamic boundary particles (DBC: Crespo, Gomez-Gesteira & Dalrymple 2007,
+// Comput. Mater. Continua 5; DualSPHysics's default): layers of fixed particles on a lattice
+// outside each face of the box, as deep as the kernel support, whose density evolves with the
+// continuity equation from the fluid around them (and never falls below rho0), so their Tait
+// pressure rises as fluid approaches and pushes it back. Chosen over mirrored ghosts because it
+// works for any wall shape with no geometry in the pair loop, it is what the DualSPHysics
+// reference runs use (so the side-by-side timing compares like with like), and it keeps one
+// pair loop for every particle.
+//
+// Slots: fluid particles in [0, n_fluid), wall particles in [n_fluid, n) in every sorted
+// order (they are keyed with tag 0 and 1 of the cell grid).
+#pragma once
+#include "corpuscle/physics/sph_kernel_families.h"
+#include "corpuscle/physics/sph_pair_terms.h"
+#include "corpuscle/physics/timestep.h"
+#include "corpuscle/sim/table.h"
+#include "corpuscle/spatial/cell_grid.h"
+
+namespace cps::sph {
+
+constexpr int kMaxProbes = 64;  // probe points per scene
+constexpr int kTagFluid = 0, kTagWall = 1;
+
+// time integration
+constexpr int kVerlet = 0;           // Verlet (Monaghan 1994; DualSPHysics's default), one pair pass a step
+constexpr int kSymplecticEuler = 1;  // v += a dt, x += v dt, rho += drho dt (needs a small CFL: the
+                                     // explicit density-velocity coupling grows acoustic modes)
+
+constexpr int kArtificialViscosity = 0;  // Monaghan 1992
+constexpr int kLaminarViscosity = 1;     // Lo & Shao 2002 (DualSPHysics's "laminar")
+
+// constant per-scene parameters
+template <int D>
+struct Model {
+  int n_fluid, n_wall;
+  SphKernelSet<D> kernels;  // density (interpolation) and gradient kernels, support h
+  float h;                  // support radius
+  float hs;                 // smoothing length of the pair terms (DualSPHysics's h)
+  float mass;               // of every particle (fluid and wall): rho0 dp^D
+  float rho0, c0, gamma, B; // Tait: p = B ((rho / rho0)^gamma - 1), B = c0^2 rho0 / gamma
+  int viscosity;            // kArtificialViscosity / kLaminarViscosity
+  ArtificialViscosity av;
+  LaminarViscosity lv;
+  DensityDiffusion dd;
+  float cfl, dt_min, dt_max;
+  int integrator;           // kVerlet / kSymplecticEuler
+  int verlet_steps;         // Verlet: an Euler step every this many steps (DualSPHysics: 40)
+  Vec<D> gravity;
+  Vec<D> lo, hi;            // the box the fluid is held in (the walls' inner faces)
+  Vec<D> domain_lo, domain_hi;  // the box with its wall layers (the cell grid's domain)
+  int n_probes;
+  float probes[kMaxProbes * D];
+  CPS_HD Vec<D> probe(int k) const {
+    Vec<D> x;
+    for (int c = 0; c < D; ++c) x[c] = probes[k * D + c];
+    return x;
+  }
+};
+
+// Tait's equation of state (Batchelor 1967; Monaghan 1994): p = B ((rho / rho0)^gamma - 1)
+template <int D>
+CPS_HD CPS_INLINE float tait_pressure(const Model<D>& m, float rho) {
+  return m.B * (fpow(rho / m.rho0, m.gamma) - 1.0f);
+}
+
+// per-step reductions over the particles (combined in a fixed order per backend)
+struct StepSums {
+  float amax2;      // largest squared fluid acceleration
+  float vmax2;      // largest squared fluid speed
+  float mu_max;     // largest |mu_ij| over the pairs (DualSPHysics's dt_cv)
+  float ke;         // fluid kinetic energy
+  float rho_min, rho_max;  // fluid density range
+  float p_max;      // largest pressure (fluid and walls)
+  long long nbrs;   // neighbours (within the support, self excluded) summed over the fluid
+  int bad;          // particles with a non-finite rate
+
+  CPS_HD static StepSums identity() {
+    StepSums s;
+    s.amax2 = s.vmax2 = s.mu_max = s.ke = 0.0f;
+    s.rho_min = 3.402823466e38f;
+    s.rho_max = -3.402823466e38f;
+    s.p_max = -3.402823466e38f;
+    s.nbrs = 0;
+    s.bad = 0;
+    return s;
+  }
+  CPS_HD static StepSums combine(const StepSums& a, const StepSums& b) {
+    StepSums s;
+    s.amax2 = fmax2(a.amax2, b.amax2);
+    s.vmax2 = fmax2(a.vmax2, b.vmax2);
+    s.mu_max = fmax2(a.mu_max, b.mu_max);
+    s.ke = a.ke + b.ke;
+    s.rho_min = fmin2(a.rho_min, b.rho_min);
+    s.rho_max = fmax2(a.rho_max, b.rho_max);
+    s.p_max = fmax2(a.p_max, b.p_max);
+    s.nbrs = a.nbrs + b.nbrs;
+    s.bad = a.bad + b.bad;
+    return s;
+  }
+};
+struct SumsOp {
+  CPS_HD StepSums operator()(const StepSums& a, const StepSums& b) const { return StepSums::combine(a, b); }
+};
+
+constexpr int kBadParticles = 1;  // a density, velocity or position went non-finite
+
+// the input of the next step: a body acceleration added to gravity (shaking or tilting the
+// box in its own frame: sloshing)
+struct Control {
+  float acc[3];
+};
+
+// the per-scene record
+struct Scene {
+  Clock clock;
+  StepSums sums;     // the last step's reductions (diagnostics)
+  StepSums pending;  // this step's, kept in sums once the step is taken
+  float step_dt;     // the dt this step integrates with (0: not taken)
+  long long outside;       // fluid particles outside the box after the last step
+  long long outside_max;   // the most there were after any step
+  // probes: pressure, velocity and the Shepard sum sum_j W_j V_j of the state a step starts
+  // from (kernel interpolation over the fluid, DualSPHysics's MeasureTool), at probe_time
+  double probe_time;
+  float probe_p[kMaxProbes];
+  float probe_v[kMaxProbes * 3];
+  float probe_w[kMaxProbes];
+};
+
+// structure of arrays (slots in sorted order; *_alt: the other buffers)
+template <int D>
+struct Arrays {
+  Vec<D> *pos, *vel, *pos_alt, *vel_alt;
+  Vec<D> *velm, *velm_alt;  // the previous step's velocity (Verlet)
+  float *rho, *rho_alt;
+  float *rhom, *rhom_alt;   // the previous step's density (Verlet)
+  int *id, *id_alt;
+  float* prs;        // pressure of the sorted state (from rho by Tait)
+  Vec<D>* acc;       // dv/dt (fluid; zero for walls)
+  float* drho;       // drho/dt
+  StepSums* items;
+};
+
+}  // namespace cps::sph

@@ -1,0 +1,268 @@
+// The SPH box's stages: functors over the particles, the probes, or one item per scene.
+// Nothing here knows which backend or which neighbour index runs it: the pair stage is a
+// begin / visit / end stage (spatial/index.h) that every index runs.
+#pragma once
+#include "corpuscle/core/atomics.h"
+#include "corpuscle/scenes/sph/model.h"
+
+namespace cps::sph {
+
+CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
+#ifdef __CUDA_ARCH__
+  atomicAdd(reinterpret_cast<unsigned long long*>(p), static_cast<unsigned long long>(v));
+#else
+  __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
+#endif
+}
+
+// stage 1: the current arrays gathered into cell order (order: sorted slot -> input slot),
+// and the pressure of the sorted state from its density (Tait)
+template <int D>
+struct ReorderStage {
+  const Model<D>* model;
+  const int* order;
+  Arrays<D> a;
+  CPS_HD void operator()(int j) const {
+    const int o = order[j];
+    a.pos_alt[j] = a.pos[o];
+    a.vel_alt[j] = a.vel[o];
+    a.velm_alt[j] = a.velm[o];
+    a.rhom_alt[j] = a.rhom[o];
+    const float rho = a.rho[o];
+    a.rho_alt[j] = rho;
+    a.id_alt[j] = a.id[o];
+    a.prs[j] = tait_pressure(*model, rho);
+  }
+};
+
+// stage 2: the pair sums of particle i (the sorted arrays of `a`):
+//   fluid i:  drho_i/dt = sum_j m_j v_ij . grad_i W_ij  (+ delta-SPH over fluid j)
+//             dv_i/dt  = -sum_j m_j (p_i / rho_i^2 + p_j / rho_j^2) grad_i W_ij + viscosity + g
+//             (Monaghan 1992, eqs. 2.7 and 3.3; the walls' particles are j like any other)
+//   wall i:   drho_i/dt = sum_{fluid j} m_j v_ij . grad_i W_ij (DBC: Crespo et al. 2007), no motion
+// Wall-wall pairs contribute nothing (neither moves). The per-particle items of the step's
+// reductions are written here.
+// the constants of the pair terms, copied out of the model (kernel parameters on CUDA: no
+// load through the model's pointer per pair)
+template <int D>
+struct PairConsts {
+  SphKernel<D> kern;  // the gradient kernel
+  float mass, hs, c0;
+  int viscosity;
+  ArtificialViscosity av;
+  LaminarViscosity lv;
+  DensityDiffusion dd;
+  Vec<D> gravity;
+  static PairConsts make(const Model<D>& m) {
+    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.viscosity, m.av, m.lv, m.dd, m.gravity};
+  }
+};
+
+template <int D>
+struct InteractStage {
+  PairConsts<D> m;
+  const Control* ctl;
+  Arrays<D> a;
+  int nf;
+
+  struct Acc {
+    Vec<D> acc;
+    float drho;
+    float mu_max;
+    int nbrs;
+  };
+
+  CPS_HD Acc begin(int) const {
+    Acc s;
+    s.acc = Vec<D>::zero();
+    s.drho = 0.0f;
+    s.mu_max = 0.0f;
+    s.nbrs = 0;
+    return s;
+  }
+
+  CPS_HD void visit(Acc& s, int i, int j, const Vec<D>& d, float r2) const {
+    if (j == i) return;
+    const bool fi = i < nf, fj = j < nf;
+    if (!fi && !fj) return;
+    const float r = fsqrt(r2);
+    const Vec<D> gw = m.kern.grad(d, r);
+    const Vec<D> dv = a.vel[i] - a.vel[j];
+    s.drho += m.mass * dot(dv, gw);
+    if (!fi) return;
+    s.nbrs += 1;
+    const float rho_i = a.rho[i], rho_j = a.rho[j];
+    const float mu = sph_mu<D>(m.hs, m.av.eta2, d, dv, r2);
+    s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
+    if (fj) s.drho += density_diffusion_rate<D>(m.dd, d, r2, rho_i, rho_j, m.mass, gw);
+    const float pterm = a.prs[i] / (rho_i * rho_i) + a.prs[j] / (rho_j * rho_j);
+    s.acc -= gw * (m.mass * pterm);
+    if (m.viscosity == kArtificialViscosity)
+      s.acc += artificial_viscosity_acc<D>(m.av, d, dv, r2, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
+    else
+      s.acc += laminar_viscosity_acc<D>(m.lv, d, dv, r2, rho_i, rho_j, m.mass, gw);
+  }
+
+  CPS_HD void end(int i, Acc& s) const {
+    StepSums it = StepSums::identity();
+    it.p_max = a.prs[i];
+    if (i < nf) {
+      Vec<D> acc = s.acc + m.gravity;
+      for (int k = 0; k < D; ++k) acc[k] += ctl->acc[k];
+      a.acc[i] = acc;
+      const Vec<D> v = a.vel[i];
+      it.amax2 = norm2(acc);
+      it.vmax2 = norm2(v);
+      it.mu_max = s.mu_max;
+      it.ke = 0.5f * m.mass * it.vmax2;
+      it.rho_min = it.rho_max = a.rho[i];
+      it.nbrs = s.nbrs;
+      if (!finite(it.amax2 + s.drho)) it.bad = 1;
+    } else {
+      a.acc[i] = Vec<D>::zero();
+      if (!finite(s.drho)) it.bad = 1;
+    }
+    a.drho[i] = s.drho;
+    a.items[i] = it;
+  }
+};
+
+// the pair stage through the cell grid, one thread per particle (GatherStageFn of
+// spatial/index.h, except that a wall particle gathers from the fluid's cells only: wall-wall
+// pairs contribute nothing, so the sums and their order are those of the full walk)
+template <int D, class Stage>
+struct GridGatherFn {
+  CellGridView<D> view;
+  Stage stage;
+  int nf;
+  CPS_HD void operator()(int i) const {
+    auto acc = stage.begin(i);
+    const CellGridView<D> v = i < nf ? view : view.tags(kTagFluid, kTagFluid + 1);
+    v.gather(i, v.position(i), [&](int j, const Vec<D>& d, float r2) { stage.visit(acc, i, j, d, r2); });
+    stage.end(i, acc);
+  }
+};
+
+// stage 3 (one thread per probe): pressure and velocity at the probe points by kernel
+// interpolation over the fluid with Shepard's normalisation,
+//   f(x) = sum_j f_j W(x - x_j) V_j / sum_j W(x - x_j) V_j,  V_j = m_j / rho_j
+// (DualSPHysics's MeasureTool); no fluid within the support: 0 (probe_w = 0 says so)
+template <int D, class View>
+struct ProbeStage {
+  const Model<D>* model;
+  Scene* g;
+  Arrays<D> a;
+  View view;  // over the sorted positions
+  int nf;
+  CPS_HD void operator()(int k) const {
+    const Model<D>& m = *model;
+    const SphKernel<D> w = m.kernels.density;
+    const Vec<D> x = m.probe(k);
+    float sw = 0.0f, sp = 0.0f;
+    Vec<D> sv = Vec<D>::zero();
+    view.gather(-1, x, [&](int j, const Vec<D>&, float r2) {
+      if (j >= nf) return;
+      const float wv = w.w_r2(r2) * (m.mass / a.rho[j]);
+      sw += wv;
+      sp += a.prs[j] * wv;
+      sv += a.vel[j] * wv;
+    });
+    const float inv = sw > 0.0f ? 1.0f / sw : 0.0f;
+    g->probe_w[k] = sw;
+    g->probe_p[k] = sp * inv;
+    for (int c = 0; c < 3; ++c) g->probe_v[3 * k + c] = c < D ? sv[c] * inv : 0.0f;
+    if (k == 0) g->probe_time = g->clock.time;
+  }
+};
+
+// stage 4 (one item per scene): the CFL dt (choose_dt_cfl), the clock
+template <int D>
+struct FinalizeStage {
+  const Model<D>* model;
+  Scene* g;
+  CPS_HD void operator()(int) const {
+    const Model<D>& m = *model;
+    Scene& G = *g;
+    Clock& C = G.clock;
+    if (C.done || C.time >= C.end_time) {
+      C.done = 1;
+      G.step_dt = 0.0f;
+      return;
+    }
+    if (C.bad) {
+      if (C.bad_step < 0) C.bad_step = C.step;
+      G.step_dt = 0.0f;
+      return;
+    }
+    const StepSums& S = G.pending;
+    if (S.bad != 0 || !finite(S.amax2 + S.mu_max + S.vmax2)) {
+      C.bad = kBadParticles;
+      C.bad_step = C.step + 1;
+      G.step_dt = 0.0f;
+      return;
+    }
+    float dt = choose_dt_cfl(m.cfl, m.hs, fsqrt(S.amax2), m.c0, S.mu_max, m.dt_min, m.dt_max);
+    const bool last = C.time + double(dt) >= C.end_time;
+    if (last) dt = float(C.end_time - C.time);
+    G.sums = S;
+    if (G.outside > G.outside_max) G.outside_max = G.outside;
+    G.outside = 0;
+    G.step_dt = dt;
+    C.dt = dt;
+    C.time = last ? C.end_time : C.time + double(dt);
+    C.done = last ? 1 : 0;
+    C.step += 1;
+  }
+};
+
+// stage 5: the Verlet scheme (Monaghan 1994; DualSPHysics's default, Crespo et al. 2015, eqs. 17-19)
+//   v^{n+1} = v^{n-1} + 2 dt a^n,  x^{n+1} = x^n + dt v^n + dt^2 a^n / 2,  rho^{n+1} = rho^{n-1} + 2 dt drho^n
+// with an Euler step (v^{n+1} = v^n + dt a^n, rho^{n+1} = rho^n + dt drho^n) every verlet_steps
+// steps, which keeps the two interleaved solutions together; or symplectic Euler (v += a dt,
+// x += v dt, rho += drho dt). Walls: their density only, never below rho0 (DBC). Fluid outside
+// the box is counted.
+template <int D>
+struct IntegrateStage {
+  const Model<D>* model;
+  Scene* g;
+  Arrays<D> a;
+  int nf;
+  CPS_HD void operator()(int i) const {
+    const float dt = g->step_dt;
+    if (!(dt > 0.0f)) return;  // a step not taken leaves the particles as they are
+    const Model<D>& m = *model;
+    // the step counter is already this step's (finalize advanced it): steps 1, 1 + N, ... are Euler
+    const bool euler = m.integrator == kSymplecticEuler || (g->clock.step - 1) % m.verlet_steps == 0;
+    const float rho0 = a.rho[i], rhom = a.rhom[i];
+    float rho = euler ? rho0 + a.drho[i] * dt : rhom + 2.0f * dt * a.drho[i];
+    if (i >= nf) {
+      a.rhom[i] = rho0;
+      a.rho[i] = rho < m.rho0 ? m.rho0 : rho;
+      return;
+    }
+    const Vec<D> v0 = a.vel[i], acc = a.acc[i];
+    Vec<D> v, x;
+    if (m.integrator == kSymplecticEuler) {
+      v = v0 + acc * dt;
+      x = a.pos[i] + v * dt;
+    } else {
+      v = euler ? v0 + acc * dt : a.velm[i] + acc * (2.0f * dt);
+      x = a.pos[i] + v0 * dt + acc * (0.5f * dt * dt);
+    }
+    a.velm[i] = v0;
+    a.rhom[i] = rho0;
+    a.vel[i] = v;
+    a.pos[i] = x;
+    a.rho[i] = rho;
+    bool out = false;
+    float sum = rho;
+    for (int k = 0; k < D; ++k) {
+      out = out || x[k] < m.lo[k] || x[k] > m.hi[k];
+      sum += x[k] + v[k];
+    }
+    if (out) add_count(&g->outside, 1);
+    if (!finite(sum)) raise_first(&g->clock.bad, kBadParticles);
+  }
+};
+
+}  // namespace cps::sph

@@ -1,0 +1,335 @@
+"""Weakly compressible SPH in a closed box: what the kinds ``fluid-box`` (seed 002's block of
+fluid in a box), ``dam-break`` (3-D) and ``dam-break-2d`` (Martin & Moyce's column of width a
+and height 2a against a wall) share. The core is cpp/include/corpuscle/scenes/sph/.
+
+The model is DualSPHysics's: continuity density, Tait's equation of state, Monaghan's
+artificial or the laminar viscosity, optional delta-SPH (Molteni & Colagrossi 2009 or
+Fourtakas et al. 2019), the CFL time step, the Verlet scheme (or symplectic Euler). Walls are dynamic boundary
+particles (DBC; Crespo, Gomez-Gesteira & Dalrymple 2007): lattice layers outside every face
+of the box, as deep as the kernel support, whose density follows the continuity equation.
+
+Particles start on a square lattice of spacing dp (from ``fluid.particles`` or
+``fluid.spacing``), the fluid's density hydrostatic, rho = rho0 (1 + rho0 g d / B)^(1/gamma)
+at depth d; the walls' density is hydrostatic where fluid lies above them. The box's
+extents are rounded to whole multiples of dp.
+
+Probes (``[[probes]]`` with ``name`` and ``position``) sample pressure and velocity by
+kernel interpolation (Shepard-normalised, as DualSPHysics's MeasureTool) in every step;
+they are recorded with every frame as the diagnostics ``probe_<name>_p``, ``_vx``, ... .
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from typing import Any
+
+import numpy as np
+
+from ..scene import INT64_MAX, KeySpec, SceneError, SceneKind, check_le
+from . import Build, Kind, Target, check_memory, key_values
+
+KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
+VISCOSITIES = {"artificial": 0, "laminar": 1}
+DIFFUSIONS = {"none": 0, "molteni": 1, "fourtakas": 2}
+INTEGRATORS = {"verlet": 0, "symplectic-euler": 1}
+UNSTABLE_REASONS = {1: "a density, velocity or position became non-finite (NaN/inf)"}
+
+_K = KeySpec
+
+
+def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: float, alpha: float) -> dict[str, KeySpec]:
+    """The keys every SPH box kind has (with this kind's defaults)."""
+    return {
+        "run.end_time": _K("float", end_time, "s", 0.0, 1e7, "simulated time at which the run ends", lo_open=True),
+        "run.seed": _K("int", 0, "", 0, INT64_MAX, "random seed (the start is a lattice: unused)"),
+        "run.record_every": _K("int", record_every, "steps", 1, 10**9, "record a frame every this many steps"),
+        "fluid.particles": _K("int", 0, "", 0, 2**31 - 1,
+                              "fluid particles (approximately: a lattice fills the block); 0: the kind's default "
+                              "for the backend, unless fluid.spacing is set"),
+        "fluid.spacing": _K("float", 0.0, "m", 0.0, 1e3, "lattice spacing dp; 0: from fluid.particles"),
+        "fluid.density": _K("float", 1000.0, "kg/m^3", 0.0, 1e6, "rest density rho0", lo_open=True),
+        "fluid.sound_speed": _K("float", 0.0, "m/s", 0.0, 1e6,
+                                "numerical sound speed c0; 0: fluid.sound_factor times sqrt(2 g H), H the fluid height"),
+        "fluid.sound_factor": _K("float", 10.0, "", 1.0, 1e3,
+                                 "c0 over the largest free-fall speed sqrt(2 g H) when fluid.sound_speed = 0 "
+                                 "(10: density changes near 1%)"),
+        "fluid.gamma": _K("float", 7.0, "", 1.0, 20.0, "Tait exponent"),
+        "fluid.gravity": _K("float", 9.81, "m/s^2", 0.0, 1e4, "gravity (along -z in 3-D, -y in 2-D)"),
+        "sph.kernel": _K("enum", "wendland", "", doc="wendland (Wendland C2), cubic-spline, or poly6-spiky "
+                         "(the seed's: Poly6 interpolation, Spiky gradient)", choices=tuple(KERNELS)),
+        "sph.smoothing": _K("float", smoothing, "dp", 0.5, 4.0,
+                            "smoothing length hs over dp; the kernel support is 2 hs (DualSPHysics: hs = 1.732 dp "
+                            "in 3-D, about 170 neighbours)"),
+        "sph.viscosity": _K("enum", "artificial", "", doc="artificial (Monaghan 1992) or laminar (Lo & Shao 2002)",
+                            choices=tuple(VISCOSITIES)),
+        "sph.alpha": _K("float", alpha, "", 0.0, 10.0, "artificial viscosity alpha"),
+        "sph.beta": _K("float", 0.0, "", 0.0, 10.0, "artificial viscosity beta (DualSPHysics: 0)"),
+        "sph.nu": _K("float", 1e-6, "m^2/s", 0.0, 1e3, "kinematic viscosity of the laminar model"),
+        "sph.diffusion": _K("enum", "fourtakas", "", doc="density diffusion: none, molteni (Molteni & Colagrossi "
+                            "2009) or fourtakas (Fourtakas et al. 2019, DualSPHysics's DDT2)", choices=tuple(DIFFUSIONS)),
+        "sph.delta": _K("float", 0.1, "", 0.0, 1.0, "density diffusion coefficient delta"),
+        "timestep.cfl": _K("float", 0.2, "", 0.0, 1.0, "CFL number of the time step (DualSPHysics: 0.2)", lo_open=True),
+        "timestep.dt_min": _K("float", 1e-9, "s", 0.0, 1.0, "smallest time step", lo_open=True),
+        "timestep.dt_max": _K("float", 1e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),
+        "timestep.integrator": _K("enum", "verlet", "", doc="verlet (DualSPHysics's default, an Euler step every "
+                                  "timestep.verlet_steps) or symplectic-euler (needs a CFL near 0.05)",
+                                  choices=tuple(INTEGRATORS)),
+        "timestep.verlet_steps": _K("int", 40, "steps", 1, 10**6, "Verlet: an Euler step every this many steps"),
+    }
+
+
+def probe_keys(dim: int) -> dict[str, KeySpec]:
+    return {"name": _K("str", "", "", doc="probe name (letters, digits, _ and -)"),
+            "position": _K(f"vec{dim}", [0.0] * dim, "m", -1e4, 1e4, "where pressure and velocity are sampled")}
+
+
+def _check_probes(values, arrays) -> None:
+    seen = set()
+    for k, p in enumerate(arrays.get("probes", [])):
+        name = str(p.get("name", ""))
+        if not name or not all(c.isalnum() or c in "_-" for c in name):
+            raise SceneError(f"probes[{k}].name must be letters, digits, _ and -, got {name!r}")
+        if name in seen:
+            raise SceneError(f"probes[{k}].name = {name!r} is used twice")
+        seen.add(name)
+    if len(arrays.get("probes", [])) > 64:
+        raise SceneError(f"probes: {len(arrays['probes'])} probes, at most 64")
+
+
+def lattice(lo_cells, hi_cells, dp: float) -> np.ndarray:
+    """Lattice points (i + 1/2) dp for integer cells lo <= i < hi per axis (float64, (n, D))."""
+    axes = [(np.arange(a, b) + 0.5) * dp for a, b in zip(lo_cells, hi_cells)]
+    grids = np.meshgrid(*axes, indexing="ij")
+    return np.column_stack([g.ravel() for g in grids])
+
+
+def hydrostatic_density(depth, rho0: float, B: float, gamma: float, g: float) -> np.ndarray:
+    """rho = rho0 (1 + rho0 g d / B)^(1/gamma): Tait's density at depth d (d <= 0: rho0)."""
+    d = np.maximum(np.asarray(depth, dtype=np.float64), 0.0)
+    return rho0 * (1.0 + rho0 * g * d / B) ** (1.0 / gamma)
+
+
+class SphBox(Kind):
+    """A box of SPH fluid; subclasses give the geometry (:meth:`geometry`) and defaults."""
+
+    particle_key = "fluid.particles"
+    unstable_reasons = UNSTABLE_REASONS
+    frame_fields = ("position", "density", "pressure")
+    default_particles: dict[str, int] = {}
+
+    def __init__(self) -> None:
+        self._series: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    @property
+    def units(self) -> dict[str, str]:  # type: ignore[override]
+        return {"position": "m", "velocity": "m/s", "density": "kg/m^3", "pressure": "Pa", "kinetic_energy": "J",
+                "vmax": "m/s", "p_max": "Pa", "mean_neighbors": "count", "outside": "count"}
+
+    # geometry ----------------------------------------------------------------------------
+    def geometry(self, v: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(box size, fluid block lower corner, fluid block upper corner), float64, in m."""
+        raise NotImplementedError
+
+    def _spacing(self, v, target: Target) -> tuple[float, int]:
+        size, flo, fhi = self.geometry(v)
+        vol = float(np.prod(fhi - flo))
+        dp = float(v["fluid.spacing"])
+        n = int(v["fluid.particles"])
+        if dp <= 0.0:
+            n = n or self.default_particles.get(target.backend, self.default_particles.get("cpu", 8192))
+            dp = (vol / n) ** (1.0 / self.dim)
+        return dp, n
+
+    def build(self, scene, target: Target, checkpoint: dict | None = None) -> Build:
+        v = scene.values
+        D = self.dim
+        size, flo, fhi = self.geometry(v)
+        dp, _ = self._spacing(v, target)
+        # whole cells of dp: the box [0, nb dp], the fluid block [f0 dp, f1 dp]
+        nb = np.maximum(np.rint(size / dp).astype(np.int64), 1)
+        f0 = np.clip(np.rint(flo / dp).astype(np.int64), 0, nb)
+        f1 = np.clip(np.rint(fhi / dp).astype(np.int64), 0, nb)
+        if np.any(f1 <= f0):
+            raise SceneError(f"{key_values(scene, ('fluid.particles', 'fluid.spacing'))}: spacing {dp:.3g} m "
+                             f"leaves no fluid in the block")
+        smoothing = float(v["sph.smoothing"])
+        hs = smoothing * dp
+        h = 2.0 * hs
+        layers = int(math.ceil(h / dp - 1e-6))
+        nf_est = int(np.prod(f1 - f0))
+        box_cells = np.prod(nb + 2 * layers) - np.prod(nb)
+        if nf_est + box_cells > 2**31 - 1:
+            raise SceneError(f"{key_values(scene, ('fluid.particles', 'fluid.spacing'))}: "
+                             f"{nf_est + box_cells} particles, more than 2^31 - 1")
+        rho0 = float(v["fluid.density"])
+        gamma = float(v["fluid.gamma"])
+        g = float(v["fluid.gravity"])
+        height = float((f1[-1] - f0[-1]) * dp)
+        if g <= 0.0 and float(v["fluid.sound_speed"]) <= 0.0:
+            raise SceneError("fluid.gravity = 0 needs fluid.sound_speed > 0 (c0 is otherwise taken from the "
+                             "free-fall speed sqrt(2 g H))")
+        c0 = float(v["fluid.sound_speed"]) or float(v["fluid.sound_factor"]) * math.sqrt(2.0 * g * height)
+        B = c0 * c0 * rho0 / gamma
+        box_hi = nb * dp
+        probes = [p["position"] for p in scene.arrays.get("probes", [])]
+        gravity = [0.0] * (D - 1) + [-g]
+        params = {
+            "n_fluid": nf_est, "n_wall": int(box_cells), "kernel": KERNELS[v["sph.kernel"]], "h": h, "hs": hs,
+            "mass": rho0 * dp ** D, "rho0": rho0, "c0": c0, "gamma": gamma,
+            "viscosity": VISCOSITIES[v["sph.viscosity"]], "alpha": float(v["sph.alpha"]), "beta": float(v["sph.beta"]),
+            "nu": float(v["sph.nu"]), "diffusion": DIFFUSIONS[v["sph.diffusion"]], "delta": float(v["sph.delta"]),
+            "cfl": float(v["timestep.cfl"]), "dt_min": float(v["timestep.dt_min"]),
+            "dt_max": float(v["timestep.dt_max"]), "gravity": gravity,
+            "integrator": INTEGRATORS[v["timestep.integrator"]], "verlet_steps": int(v["timestep.verlet_steps"]),
+            "box_lo": [0.0] * D, "box_hi": box_hi.tolist(),
+            "domain_lo": (-(layers + 1) * dp * np.ones(D)).tolist(), "domain_hi": (box_hi + (layers + 1) * dp).tolist(),
+            "probes": [float(x) for p in probes for x in p],
+        }
+        check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
+                     f"{nf_est + box_cells} particles")
+        # the walls: every lattice point of the box widened by `layers` that is not inside it
+        pts = lattice(-layers * np.ones(D, dtype=np.int64), nb + layers, dp)
+        inside = np.all((pts > 0.0) & (pts < box_hi), axis=1)
+        wall = pts[~inside]
+        top = float(f1[-1] * dp)
+        near = np.all((wall[:, :-1] > (f0[:-1] - layers) * dp) & (wall[:, :-1] < (f1[:-1] + layers) * dp), axis=1)
+        wall_rho = np.where(near, hydrostatic_density(top - wall[:, -1], rho0, B, gamma, g), rho0)
+        if checkpoint is None:
+            pos = lattice(f0, f1, dp)
+            vel = np.zeros_like(pos)
+            rho = hydrostatic_density(top - pos[:, -1], rho0, B, gamma, g)
+        else:
+            pos = np.asarray(checkpoint["position"], dtype=np.float64)
+            vel = np.asarray(checkpoint["velocity"], dtype=np.float64)
+            rho = np.asarray(checkpoint["density"], dtype=np.float64)
+            if pos.shape != (nf_est, D):
+                raise ValueError(f"checkpoint: {pos.shape[0] if pos.ndim else 0} fluid particles, the scene has {nf_est}")
+            if "wall_density" in checkpoint:
+                wall_rho = np.asarray(checkpoint["wall_density"], dtype=np.float64)
+            if "wall_position" in checkpoint:
+                wall = np.asarray(checkpoint["wall_position"], dtype=np.float64)
+        arrays = {"position": np.ascontiguousarray(pos, dtype=np.float32),
+                  "velocity": np.ascontiguousarray(vel, dtype=np.float32),
+                  "density": np.ascontiguousarray(rho, dtype=np.float32),
+                  "wall_position": np.ascontiguousarray(wall, dtype=np.float32).reshape(-1, D),
+                  "wall_density": np.ascontiguousarray(wall_rho, dtype=np.float32)}
+        info = {"spacing": dp, "h": h, "hs": hs, "mass": rho0 * dp ** D, "rho0": rho0, "c0": c0, "B": B,
+                "gamma": gamma, "gravity": g, "layers": layers, "box": box_hi.copy(), "fluid_height": height,
+                "fluid_lo": f0 * dp, "fluid_hi": f1 * dp, "n_fluid": nf_est, "n_wall": int(box_cells),
+                "probe_names": [str(p["name"]) for p in scene.arrays.get("probes", [])],
+                "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D)}
+        info.update(self.extra_info(v, info))
+        return Build(params, arrays, info)
+
+    def extra_info(self, v, info) -> dict[str, Any]:
+        return {}
+
+    # reading -----------------------------------------------------------------------------
+    def probes(self, sim, s: dict[str, Any] | None = None) -> dict[str, dict[str, Any]]:
+        """name -> {position, pressure, velocity, weight} of the probes (the state at probe_time)."""
+        s = sim.core.scalars() if s is None else s
+        out = {}
+        p, vel, w = s["probe_pressure"], s["probe_velocity"], s["probe_weight"]
+        for k, name in enumerate(sim.info["probe_names"]):
+            out[name] = {"position": sim.info["probe_positions"][k].tolist(), "pressure": float(p[k]),
+                         "velocity": [float(x) for x in vel[3 * k:3 * k + self.dim]], "weight": float(w[k])}
+        return out
+
+    def state(self, sim, s: dict[str, Any]) -> dict[str, Any]:
+        return {"time": s["time"], "end_time": s["end_time"], "step": s["step"], "dt": s["dt"],
+                "done": bool(s["done"]), "bad": s["bad"], "bad_step": s["bad_step"],
+                "kinetic_energy": float(s["sums_ke"]), "vmax": float(s["vmax"]), "amax": float(s["amax"]),
+                "rho_min": float(s["sums_rho_min"]), "rho_max": float(s["sums_rho_max"]),
+                "p_max": float(s["sums_p_max"]), "mean_neighbors": float(s["mean_neighbors"]),
+                "outside": int(s["outside"]), "outside_max": max(int(s["outside"]), int(s["outside_max"])),
+                "chosen_dt": float(s["chosen_dt"]), "probe_time": float(s["probe_time"]),
+                "probes": self.probes(sim, s)}
+
+    def diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:
+        st = self.state(sim, s)
+        out = {k: float(st[k]) for k in ("kinetic_energy", "vmax", "rho_min", "rho_max", "p_max", "mean_neighbors",
+                                         "outside")}
+        out["probe_time"] = st["probe_time"]
+        axes = "xyz"[:self.dim]
+        for name, p in st["probes"].items():
+            out[f"probe_{name}_p"] = p["pressure"]
+            for a, x in zip(axes, p["velocity"]):
+                out[f"probe_{name}_v{a}"] = x
+        out.update(self.extra_diagnostics(sim))
+        # the series the summary reports
+        series = self._series.setdefault(sim, {})
+        for k, x in out.items():
+            series.setdefault(k, []).append(x)
+        return out
+
+    def extra_diagnostics(self, sim) -> dict[str, float]:
+        return {}
+
+    def result(self, sim, s: dict[str, Any]) -> dict[str, Any]:
+        st = self.state(sim, s)
+        out: dict[str, Any] = {"fluid_particles": sim.info["n_fluid"], "wall_particles": sim.info["n_wall"],
+                               "spacing": sim.info["spacing"], "mean_neighbors": st["mean_neighbors"],
+                               "outside_max": st["outside_max"]}
+        series = self._series.get(sim, {})
+        for name in sim.info["probe_names"]:
+            ps = series.get(f"probe_{name}_p")
+            if ps:
+                out[f"probe_{name}_p_max"] = float(np.max(ps))
+                out[f"probe_{name}_p_mean"] = float(np.mean(ps))
+            out[f"probe_{name}_p"] = st["probes"][name]["pressure"]
+        return out
+
+    def header(self, sim) -> dict[str, Any]:
+        p = sim.params
+        return {"container": {"type": "box", "min": list(p["box_lo"]), "max": list(p["box_hi"])},
+                "obstacles": [], "bodies": [], "particles": sim.info["n_fluid"], "wall_particles": sim.info["n_wall"],
+                "spacing": sim.info["spacing"], "h": sim.info["h"], "particle_radius": 0.5 * sim.info["spacing"],
+                "probes": {n: sim.info["probe_positions"][k].tolist() for k, n in enumerate(sim.info["probe_names"])},
+                "units": dict(self.units)}
+
+    def control(self, sim, acceleration=(0.0, 0.0, 0.0)) -> dict[str, list[float]]:
+        """A body acceleration (m/s^2) added to gravity from the next step on (shaking, tilting)."""
+        from . import finite_vector
+        a = list(acceleration)
+        if len(a) == self.dim:
+            a = a + [0.0] * (3 - self.dim)
+        return {"acceleration": finite_vector("acceleration", a, 3)}
+
+    def set_particles(self, sim, positions, velocities=None) -> None:
+        from . import particle_array
+        n = int(sim.info["n_fluid"])
+        pos = particle_array("positions", positions, n, self.dim)
+        vel = np.zeros_like(pos) if velocities is None else particle_array("velocities", velocities, n, self.dim)
+        self.check_positions(sim, pos)
+        sim.core.upload("position", pos)
+        sim.core.upload("velocity", vel)
+
+    def check_positions(self, sim, positions: np.ndarray) -> None:
+        hi = np.asarray(sim.params["box_hi"])
+        out = np.flatnonzero(~np.all((positions >= 0.0) & (positions <= hi), axis=1))
+        if out.size:
+            raise ValueError(f"positions[{int(out[0])}] = {positions[int(out[0])].tolist()} is outside the box")
+
+    # helpers for the dam break -------------------------------------------------------------
+    @staticmethod
+    def fluid_positions(sim) -> np.ndarray:
+        return np.asarray(sim.core.download("position"), dtype=np.float64)
+
+
+def dam_front(pos: np.ndarray, dp: float) -> float:
+    """The surge front: the largest x of the fluid plus half a spacing (a particle's extent)."""
+    return float(pos[:, 0].max() + 0.5 * dp)
+
+
+def column_height(pos: np.ndarray, dp: float) -> float:
+    """The water height at the back wall (x = 0): the highest fluid within two spacings of it."""
+    near = pos[:, 0] < 2.0 * dp
+    return float(pos[near, -1].max() + 0.5 * dp) if near.any() else 0.0
+
+
+def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int, checks=()) -> SceneKind:
+    return SceneKind(name=name, description=description, keys=keys, arrays={"probes": probe_keys(dim)},
+                     required_in_arrays={"probes": ("name", "position")},
+                     checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, *checks])
+

@@ -1,0 +1,56 @@
+"""Validations (``corpuscle validate NAME``): runs checked against experiments and theory.
+
+Each module of this package defines ``add_arguments(parser)`` (its own options) and
+``run(args) -> list[Check]``; its default size runs on 2 CPU cores in well under a minute,
+``--full`` (or a larger ``--particles``) is for the GPU. :data:`VALIDATIONS` maps the CLI's
+names to the modules; :func:`load` imports one.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import asdict, dataclass
+from types import ModuleType
+
+__all__ = ["Check", "VALIDATIONS", "load", "as_dicts"]
+
+
+@dataclass
+class Check:
+    """One check: ``measured`` against ``reference`` within ``tolerance`` (difference =
+    measured - reference)."""
+
+    name: str
+    measured: float
+    reference: float
+    tolerance: float
+    passed: bool
+    unit: str = ""
+    detail: str = ""
+
+
+# CLI name -> module of this package
+VALIDATIONS = {"dam-break": "dam_break", "hydrostatic": "hydrostatic", "wind-tunnel": "wind_tunnel"}
+
+
+def load(name: str) -> ModuleType:
+    """The validation module of a CLI name (ValueError naming the known ones)."""
+    if name not in VALIDATIONS:
+        raise ValueError(f"unknown validation {name!r} (validations: {', '.join(VALIDATIONS)})")
+    try:
+        return importlib.import_module(f"{__name__}.{VALIDATIONS[name]}")
+    except ModuleNotFoundError as exc:
+        if exc.name == f"{__name__}.{VALIDATIONS[name]}":
+            raise ValueError(f"validation {name!r} is not part of this build") from None
+        raise
+
+
+def within(name: str, measured: float, reference: float, tolerance: float, unit: str = "", detail: str = "") -> Check:
+    """A check that |measured - reference| <= tolerance (NaN fails)."""
+    m, r = float(measured), float(reference)
+    ok = bool(abs(m - r) <= tolerance)
+    return Check(name, m, r, float(tolerance), ok, unit, detail)
+
+
+def as_dicts(checks: list[Check]) -> list[dict]:
+    return [asdict(c) | {"difference": c.measured - c.reference} for c in checks]
