@@ -1090,7 +1090,7 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
     print(head + (f" {'speedup':>9}" if serial else ""))
     for r in rows:
         if sweep or nbr:
-            serial = base(r, "serial")
+            serial = None if batched else base(r, "serial")  # a batch's rows have no speedup column
             print(f"{str(r.get('neighbors')):<9}", end="")
         init = r.get("init_seconds")
         init_text = f"{init:8.3f}" if isinstance(init, (int, float)) else f"{'':>8}"
