@@ -160,7 +160,8 @@ class Pipeline {
     } else if constexpr (std::is_same_v<Index, CompactIndex>) {
       gather_stage_compact(ex_, compact_.view(gv, kTagWall), st);
     } else {
-      ex_.for_each(n_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_});
+      ex_.for_each(nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, 0});
+      if (n_ > nf_) ex_.for_each(n_ - nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, nf_});
     }
     ex_.mark(1);
     // 3. the probes of this state (the grid's walk; all pairs for that index)

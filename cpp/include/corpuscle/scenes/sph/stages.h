@@ -135,7 +135,10 @@ struct GridGatherFn {
   CellGridView<D> view;
   Stage stage;
   int nf;
-  CPS_HD void operator()(int i) const {
+  int base;  // the first slot: the fluid and the walls run as two loops, each spread evenly over
+             // the threads (one loop over both would give one thread the fluid, another the walls)
+  CPS_HD void operator()(int k) const {
+    const int i = base + k;
     auto acc = stage.begin(i);
     const CellGridView<D> v = i < nf ? view : view.tags(kTagFluid, kTagFluid + 1);
     v.gather(i, v.position(i), [&](int j, const Vec<D>& d, float r2) { stage.visit(acc, i, j, d, r2); });
