@@ -37,6 +37,9 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=200, help="steps per timed repeat")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--reset-share", type=float, default=0.1, help="share of the scenes reset (default 0.1)")
+    p.add_argument("--settle", type=float, default=0.0,
+                   help="simulated seconds each batch settles before the timing (default 0: timed from the "
+                        "Poisson-disk start, as the single-scene bench; a settled batch rebuilds its lists less often)")
     p.add_argument("--max-seconds", type=float, default=60.0, help="skip a configuration whose step would take longer")
     p.add_argument("--json", default="")
     a = p.parse_args(argv)
@@ -56,10 +59,10 @@ def main(argv=None) -> int:
         t1 = median_time(lambda: single.bench_steps(a.steps), a.repeats) / a.steps
         del single
         for B in a.batches:
-            row = {"particles": n, "batch": B, "backend": a.backend, "single_step_seconds": t1}
+            row = {"particles": n, "batch": B, "backend": a.backend, "single_step_seconds": t1, "settle": a.settle}
             try:
                 t0 = time.perf_counter()
-                b = Batch.from_scene("magic8ball", n=B, backend=a.backend, particles=n, settle=0.0, shake=[])
+                b = Batch.from_scene("magic8ball", n=B, backend=a.backend, particles=n, settle=a.settle, shake=[])
                 row["init_seconds"] = time.perf_counter() - t0
             except MemoryNeedError as exc:
                 row["skipped"] = str(exc)
