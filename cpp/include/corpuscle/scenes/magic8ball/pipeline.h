@@ -223,7 +223,7 @@ class Pipeline {
                                        StepSums::identity(), FinalizeStage{md, g});
       } else {
         ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
-        ex_.for_each(B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
+        reduce_scenes(ex_, B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
         ex_.for_each(B, FinalizeStage{md, g, scene_sums_.data()});
       }
       ex_.mark(2);
@@ -235,7 +235,7 @@ class Pipeline {
       if constexpr (!Many) {
         ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
       } else {
-        ex_.for_each(B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
+        reduce_scenes(ex_, B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
         ex_.for_each(B, StoreSumsStage{g, scene_sums_.data()});
       }
       ex_.mark(2);

@@ -382,27 +382,41 @@ CPS_HD CPS_INLINE float sums_dt(const Model& m, const ScenePhysics& P, const Ste
   return choose_dt(m.dt, m.h, max_speed(s, die), fsqrt(s.amax2), P.c0, P.sph.viscosity / P.sph.rest_density);
 }
 
-// a batch's reductions, one scene per item, in the CPU backend's fixed order (kReduceChunks
-// chunks of the scene's items, combined in order): each scene's sums are what it gets alone
-constexpr int kSceneReduceChunks = 64;  // = CpuExec::kReduceChunks
+// a batch's reductions, one scene per tile, in the CPU backend's fixed order (kReduceChunks
+// chunks of the scene's items, each summed in order by a lane, then the chunks combined in
+// order by lane 0): each scene's sums are what it gets alone, on every backend
+constexpr int kSceneReduceChunks = 64;  // = CpuExec::kReduceChunks, the tile's lanes
 struct SceneReduceStage {
   const Model* model;
   const Scene* g;
   const StepSums* items;
   StepSums* out;
-  CPS_HD void operator()(int s) const {
+  template <class Tile>
+  CPS_HD void operator()(int s, Tile& t) const {
+    static_assert(Tile::kSize == kSceneReduceChunks, "one lane per chunk");
     const int n = g[s].phys.n_active, base = s * model->n_fluid;
     const int chunk = (n + kSceneReduceChunks - 1) / kSceneReduceChunks;
-    StepSums total = StepSums::identity();
-    for (int c = 0; c < kSceneReduceChunks; ++c) {
+    StepSums* parts = t.template shared<StepSums>(kSceneReduceChunks);
+    t.lanes([&](int c) {
       StepSums part = StepSums::identity();
       const int b = c * chunk, e = b + chunk < n ? b + chunk : n;
       for (int k = b; k < e; ++k) part = StepSums::combine(part, items[base + k]);
-      total = StepSums::combine(total, part);
-    }
-    out[s] = total;
+      parts[c] = part;
+    });
+    t.sync();
+    t.lanes([&](int c) {
+      if (c != 0) return;
+      StepSums total = StepSums::identity();
+      for (int k = 0; k < kSceneReduceChunks; ++k) total = StepSums::combine(total, parts[k]);
+      out[s] = total;
+    });
   }
 };
+// the tile launch of it
+template <class Exec>
+void reduce_scenes(Exec& ex, int scenes, const SceneReduceStage& f) {
+  ex.template for_each_tile<kSceneReduceChunks>(scenes, f, sizeof(StepSums) * kSceneReduceChunks);
+}
 
 // an evaluation's reductions, kept as the scenes' sums
 struct StoreSumsStage {
