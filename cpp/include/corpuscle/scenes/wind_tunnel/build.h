@@ -27,6 +27,8 @@ inline Model build_model(const ParamSource& p, const ArraySource* arrays) {
     throw Error("wind-tunnel: integrator must be 0 (forward Euler) or 1 (symplectic Euler)");
   m.radius = p.f("radius");
   m.mass = p.f("mass");
+  m.collide = p.has("collide") ? int(p.integer("collide") != 0) : 1;
+  m.recycle_scattered = p.has("recycle_scattered") ? int(p.integer("recycle_scattered") != 0) : 0;
   m.pp = SpringDashpot{p.f("k"), p.f("c")};
   m.wall = SpringDashpot{p.f("k_wall"), p.f("c_wall")};
   m.wing = SpringDashpot{p.f("k_wing"), p.f("c_wing")};

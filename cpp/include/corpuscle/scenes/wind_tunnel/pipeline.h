@@ -39,7 +39,7 @@ class Pipeline {
 
   static double bytes_needed(const Model& m) {
     const double n = m.n;
-    const double per = 2 * (2 * sizeof(Vec2) + sizeof(int)) + sizeof(Vec2) + sizeof(float) + sizeof(int) +
+    const double per = 2 * (2 * sizeof(Vec2) + 2 * sizeof(int)) + sizeof(Vec2) + 2 * sizeof(float) + sizeof(int) +
                        sizeof(StepSums) + 4 * sizeof(uint64_t) + 2 * sizeof(int);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
     return n * per + cells + sizeof(Model);
@@ -57,9 +57,11 @@ class Pipeline {
       pos_[p].resize(n);
       vel_[p].resize(n);
       id_[p].resize(n);
+      scat_[p].resize(n);
     }
     force_.resize(n);
     pressure_.resize(n);
+    ndens_.resize(n);
     contacts_.resize(n);
     items_.resize(n);
   }
@@ -98,9 +100,14 @@ class Pipeline {
     Model* md = model_.data();
     Scene* g = g_;
     // 1. key and sort the current positions, gather the arrays into cell order, mark cells
-    grid_.sort(ex_, pos_[cur].data(), nullptr, n);
-    ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
-    grid_.mark(ex_);
+    // (a collisionless gas needs no index: the arrays are copied as they are)
+    if (m_.collide) {
+      grid_.sort(ex_, pos_[cur].data(), nullptr, n);
+      ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
+      grid_.mark(ex_);
+    } else {
+      ex_.for_each(n, ReorderStage{nullptr, arrays(cur, nxt)});
+    }
     ex_.mark(0);
     Arrays s = arrays(nxt, cur);
     CellGridView<D> view = grid_.view(s.pos);
@@ -140,10 +147,14 @@ class Pipeline {
       std::vector<int> ids(n);
       for (int i = 0; i < n; ++i) ids[i] = i;
       ex_.to_device(id_[cur].data(), ids.data(), n * sizeof(int));
+      std::vector<int> zero(n, 0);
+      ex_.to_device(scat_[cur].data(), zero.data(), n * sizeof(int));
     } else if (name == "velocity") {
       ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec2));
     } else if (name == "id") {
       ex_.to_device(id_[cur].data(), src, n * sizeof(int));
+    } else if (name == "scattered") {
+      ex_.to_device(scat_[cur].data(), src, n * sizeof(int));
     } else {
       throw Error("wind-tunnel: field '" + name + "' cannot be set");
     }
@@ -171,6 +182,9 @@ class Pipeline {
     a.vel_alt = vel_[nxt].data();
     a.id = id_[cur].data();
     a.id_alt = id_[nxt].data();
+    a.scattered = scat_[cur].data();
+    a.scattered_alt = scat_[nxt].data();
+    a.number_density = ndens_.data();
     a.force = force_.data();
     a.pressure = pressure_.data();
     a.contacts = contacts_.data();
@@ -186,6 +200,8 @@ class Pipeline {
   Buf<Model> model_;
   Buf<Vec2> pos_[2], vel_[2];
   Buf<int> id_[2];
+  Buf<int> scat_[2];
+  Buf<float> ndens_;
   Buf<Vec2> force_;
   Buf<float> pressure_;
   Buf<int> contacts_;
