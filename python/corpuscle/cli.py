@@ -1054,6 +1054,53 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
 register(Command("bench", "time steps per second on each backend", _configure_bench, _cmd_bench))
 
 
+# ---------------------------------------------------------------------------
+# corpuscle validate
+# ---------------------------------------------------------------------------
+
+
+def _configure_validate(p: argparse.ArgumentParser) -> None:
+    p.add_argument("name", metavar="NAME", help="the validation: " + ", ".join(_validation_names()))
+    p.add_argument("options", nargs=argparse.REMAINDER,
+                   help="the validation's own options (`corpuscle validate NAME --help`), and --json")
+
+
+def _validation_names() -> list[str]:
+    from .validation import VALIDATIONS
+
+    return sorted(VALIDATIONS)
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from . import validation
+
+    mod = validation.load(args.name)  # unknown name: ValueError, one line, exit 2
+    sub = _Parser(prog=f"{PROG} validate {args.name}", description=(mod.__doc__ or "").strip().splitlines()[0])
+    sub.add_argument("--json", action="store_true", help="print the checks as JSON")
+    mod.add_arguments(sub)
+    opts = sub.parse_args(args.options)  # bad options: exit 2
+    checks = mod.run(opts)
+    ok = all(c.passed for c in checks)
+    if opts.json:
+        print(json.dumps([dict(c.__dict__, difference=c.measured - c.reference) for c in checks], indent=2,
+                         default=_json_default))
+    else:
+        width = max([len(c.name) for c in checks] + [5])
+        print(f"{'check':<{width}}  {'measured':>11} {'reference':>11} {'difference':>11} {'tolerance':>10}  result")
+        for c in checks:
+            print(f"{c.name:<{width}}  {c.measured:>11.5g} {c.reference:>11.5g} {c.measured - c.reference:>+11.3g} "
+                  f"{c.tolerance:>10.3g}  {'PASS' if c.passed else 'FAIL'}" + (f"  {c.unit}" if c.unit else ""))
+        for c in checks:
+            if c.detail:
+                print(f"  {c.name}: {c.detail}")
+        print("PASS" if ok else "FAIL")
+    return 0 if ok else 1
+
+
+register(Command("validate", "compare a scene with theory or experiment (PASS/FAIL)", _configure_validate,
+                 _cmd_validate))
+
+
 def _register_viz() -> None:
     """render / plot / export (issue 3): their modules import heavy libraries lazily."""
     from . import export, plot, render
