@@ -1101,6 +1101,15 @@ register(Command("validate", "compare a scene with theory or experiment (PASS/FA
                  _cmd_validate))
 
 
+def _register_polar() -> None:
+    from . import polar
+
+    register(Command("polar", polar.HELP, polar.configure_parser, polar.run_command, polar.DESCRIPTION))
+
+
+_register_polar()
+
+
 def _register_viz() -> None:
     """render / plot / export (issue 3): their modules import heavy libraries lazily."""
     from . import export, plot, render
