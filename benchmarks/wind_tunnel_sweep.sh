@@ -16,9 +16,10 @@ date -u +%Y-%m-%dT%H:%MZ | tee -a "$OUT/device.txt"
 # 1. CUDA against the CPU (gpu-marked) and the wind tunnel's own tests
 python3 -m pytest -q -m gpu tests/test_backends.py 2>&1 | tee "$OUT/gpu_tests.log" | tail -3
 python3 -m pytest -q tests/test_wind_tunnel.py tests/test_wind_tunnel_validation.py tests/test_wind_tunnel_polar.py \
+  tests/test_wind_tunnel_index.py tests/test_wind_tunnel_gpu.py \
   2>&1 | tee "$OUT/wind_tunnel_tests.log" | tail -3
 
-# 2. the validation at the GPU size (2,097,152 particles, stiffer contact, 2 s window)
+# 2. the validation at the GPU size (2,097,152 particles, stiffer contact, 1 s window; 11 runs of about 50,000 steps)
 corpuscle validate wind-tunnel --full --backend cuda 2>&1 | tee "$OUT/validate_full.txt" | tail -25
 corpuscle validate wind-tunnel --full --backend cuda --json > "$OUT/validate_full.json" 2>/dev/null || true
 
@@ -33,6 +34,9 @@ if [ -z "${QUICK:-}" ]; then
   # the CPU backends at the CPU default (131,072) for the same table
   corpuscle bench wind-tunnel --backend serial cpu --steps 20 --repeats 3 --warmup 5 \
     --json "$OUT/bench_cpu.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
+  # the all-pairs reference index (O(N^2)) at the smallest count
+  corpuscle bench wind-tunnel --backend cuda --neighbors allpairs --particles 16384 --steps 50 --repeats 3 \
+    --json "$OUT/bench_allpairs_16384.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
   # a collisionless gas (no index at all): the cost of the rest of the step
   corpuscle bench wind-tunnel --backend cuda --set contact.enabled=false --steps 200 --repeats 3 \
     --json "$OUT/bench_collisionless.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"

@@ -79,7 +79,7 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
 }
 
 inline const std::vector<std::string>& index_names() {
-  static const std::vector<std::string> names = {GridIndex::name};
+  static const std::vector<std::string> names = {GridIndex::name, AllPairsIndex::name};
   return names;
 }
 
@@ -87,7 +87,8 @@ template <class Exec>
 std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
   const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
   if (idx == GridIndex::name) return make_with<Exec, GridIndex>(std::move(ex), r);
-  throw Error("wind-tunnel: unknown index '" + idx + "' (indexes: grid)");
+  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex>(std::move(ex), r);
+  throw Error("wind-tunnel: unknown index '" + idx + "' (indexes: grid, allpairs)");
 }
 
 template <class Exec>

@@ -19,6 +19,12 @@ namespace cps::wt {
 
 struct GridIndex {
   static constexpr const char* name = "grid";
+  static constexpr bool kGrid = true;
+};
+// every particle against every other (O(N^2)): the reference the grid is tested against
+struct AllPairsIndex {
+  static constexpr const char* name = "allpairs";
+  static constexpr bool kGrid = false;
 };
 
 template <class Exec, class Index>
@@ -101,7 +107,8 @@ class Pipeline {
     Scene* g = g_;
     // 1. key and sort the current positions, gather the arrays into cell order, mark cells
     // (a collisionless gas needs no index: the arrays are copied as they are)
-    if (m_.collide) {
+    // (the all-pairs reference needs no order either)
+    if (m_.collide && Index::kGrid) {
       grid_.sort(ex_, pos_[cur].data(), nullptr, n);
       ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
       grid_.mark(ex_);
@@ -110,9 +117,15 @@ class Pipeline {
     }
     ex_.mark(0);
     Arrays s = arrays(nxt, cur);
-    CellGridView<D> view = grid_.view(s.pos);
     // 2. contacts by gather
-    ex_.for_each(n, ForceStage{md, g, s, view});
+    if constexpr (Index::kGrid) {
+      CellGridView<D> view = grid_.view(s.pos);
+      ex_.for_each(n, ForceStage<CellGridView<D>>{md, g, s, view, grid_.spec()});
+    } else {
+      const float reach = 2.0f * m_.radius;
+      AllPairsView<D> view{s.pos, n, reach * reach * (1.0f + 4e-6f)};
+      ex_.for_each(n, ForceStage<AllPairsView<D>>{md, g, s, view, grid_.spec()});
+    }
     ex_.mark(1);
     if (integrate) {
       // 3. the reductions and the per-scene update

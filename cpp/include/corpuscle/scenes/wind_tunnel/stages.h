@@ -3,6 +3,7 @@
 #pragma once
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/scenes/wind_tunnel/model.h"
+#include "corpuscle/spatial/allpairs.h"
 
 namespace cps::wt {
 
@@ -131,14 +132,40 @@ CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const Vec2& x, const Vec2
   return F;
 }
 
-// stage 2: contact forces by gather over the cell grid (each particle sums its own: no
-// atomics, the same sum in the same order on every backend), walls, airfoil; the
-// per-particle items of the step's reductions
+// the number density around x: the particles in the 3 x 3 cells of `spec` around x's cell,
+// itself excluded, over the block's area (cells inside the grid); from the cell ranges on
+// the grid, by testing every particle's cell with the all-pairs index (the same count)
+CPS_HD CPS_INLINE float block_density(const CellGridView<D>& grid, const CellGridSpec<D>&, const Vec2& x) {
+  int count, cells;
+  grid.block_count(x, count, cells);
+  return float(count - 1) / (float(cells) * grid.spec.cell * grid.spec.cell);
+}
+CPS_HD CPS_INLINE float block_density(const AllPairsView<D>& all, const CellGridSpec<D>& spec, const Vec2& x) {
+  int c[D], cj[D];
+  spec.cell_of(x, c);
+  int count = 0;
+  for (int j = 0; j < all.n; ++j) {
+    spec.cell_of(all.pos[j], cj);
+    const int dx = cj[0] - c[0], dy = cj[1] - c[1];
+    count += (dx >= -1 && dx <= 1 && dy >= -1 && dy <= 1) ? 1 : 0;
+  }
+  int cells = 0;
+  for (int y = c[1] - 1; y <= c[1] + 1; ++y)
+    for (int xx = c[0] - 1; xx <= c[0] + 1; ++xx)
+      cells += (xx >= 0 && xx < spec.dims[0] && y >= 0 && y < spec.dims[1]) ? 1 : 0;
+  return float(count - 1) / (float(cells) * spec.cell * spec.cell);
+}
+
+// stage 2: contact forces by gather over the index (the cell grid, or every particle for
+// the all-pairs reference; each particle sums its own: no atomics, the same sum in the same
+// order on every backend), walls, airfoil; the per-particle items of the step's reductions
+template <class View>
 struct ForceStage {
   const Model* model;
   const Scene* g;
   Arrays s;
-  CellGridView<D> grid;
+  View grid;
+  CellGridSpec<D> spec;  // the cells the number density counts in
   CPS_HD void operator()(int i) const {
     if (halted(g)) return;  // the reduction of a step not taken is discarded
     const Model& m = *model;
@@ -161,11 +188,7 @@ struct ForceStage {
       }
     });
     float density = 0.0f;
-    if (m.collide) {
-      int count, cells;
-      grid.block_count(x, count, cells);
-      density = float(count - 1) / (float(cells) * grid.spec.cell * grid.spec.cell);
-    }
+    if (m.collide) density = block_density(grid, spec, x);
     StepSums it = StepSums::identity();
     int scattered = s.scattered[i];
     F += boundary_forces(m, x, v, pressure, contacts, it, scattered);

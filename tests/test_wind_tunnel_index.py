@@ -1,0 +1,69 @@
+"""The wind tunnel's broad phase: the cell grid (the default) and the all-pairs reference give
+the same contact set (per-particle contact counts equal, and equal to a float64 NumPy count),
+the same number densities and the same forces (to float rounding: the sums run in another
+order); both are listed and selectable."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from corpuscle import Simulation, _core
+from corpuscle.kinds import wind_tunnel as wt
+from corpuscle.scene import load_scene
+
+
+def make(index, n=3000):
+    return Simulation.from_scene(load_scene("wind-tunnel"), backend="serial", particles=n, neighbors=index,
+                                 overrides={"inflow.speed": 1.0, "inflow.speed_ratio": 1.0,
+                                            "gas.solid_fraction": 0.3})
+
+
+def _reference_contacts(sim, p):
+    """float64: overlapping pairs, wall and airfoil contacts of every particle."""
+    r = sim.radius
+    d2 = ((p[:, None, :] - p[None, :, :]) ** 2).sum(-1)
+    pp = (d2 < (2 * r) ** 2).sum(1) - 1
+    lo, hi = sim.params["channel_lo"][1], sim.params["channel_hi"][1]
+    walls = (p[:, 1] - lo < r).astype(int) + (hi - p[:, 1] < r).astype(int)
+    foil = (wt.signed_distance(sim.info["airfoil"], p) < r).astype(int)
+    return pp + walls + foil
+
+
+def test_indexes_are_registered():
+    assert dict(_core.kinds())["wind-tunnel"] == ["grid", "allpairs"]
+    with pytest.raises(Exception, match="--neighbors must be one of grid, allpairs, got 'lbvh'"):
+        make("lbvh", 500)
+
+
+def test_grid_and_allpairs_give_the_same_contacts_and_forces():
+    a, b = make("grid"), make("allpairs")
+    checked = 0
+    for _ in range(3):
+        a.step(40)
+        ia = np.argsort(a.field("id"))
+        b.set_particles(a.positions[ia], a.velocities[ia])  # the same state, ids in order
+        a.evaluate()
+        b.evaluate()
+        ia, ib = np.argsort(a.field("id")), np.argsort(b.field("id"))
+        ca, cb = a.field("contacts")[ia], b.field("contacts")[ib]
+        assert np.array_equal(ca, cb)
+        ref = _reference_contacts(a, a.positions[ia].astype(np.float64))
+        assert np.array_equal(ca, ref)
+        assert np.array_equal(a.field("number_density")[ia], b.field("number_density")[ib])
+        fa, fb = a.field("force")[ia].astype(np.float64), b.field("force")[ib].astype(np.float64)
+        scale = np.abs(fa).max()
+        assert np.abs(fa - fb).max() <= 1e-5 * scale
+        pa, pb = a.field("pressure")[ia], b.field("pressure")[ib]
+        assert np.abs(pa - pb).max() <= 1e-5 * np.abs(pa).max()
+        checked += int((ca > 0).sum())
+    assert checked > 300  # the comparison covers many contacts
+
+
+def test_allpairs_runs_the_same_flow():
+    a, b = make("grid", 1200), make("allpairs", 1200)
+    a.step(100)
+    b.step(100)
+    sa, sb = a.state(), b.state()
+    assert sa["step"] == sb["step"] and abs(sa["time"] - sb["time"]) < 1e-9 * max(sa["time"], 1)
+    assert sb["pushouts"] == 0 and sb["recycled"] > 0
