@@ -31,7 +31,7 @@ def channel(sim):
 
 
 def test_registered_with_its_indexes():
-    assert dict(_core.kinds())["wind-tunnel"] == ["grid", "allpairs"]
+    assert dict(_core.kinds())["wind-tunnel"] == ["grid", "lbvh", "allpairs"]
     sim = make(particles=500)
     assert sim.kind.dim == 2 and sim.n_particles == 500
     assert sim.positions.shape == (500, 2)

@@ -22,7 +22,7 @@ def _by_id(sim, name):
     return sim.field(name)[np.argsort(sim.field("id"))]
 
 
-@pytest.mark.parametrize("index", ["grid", "allpairs"])
+@pytest.mark.parametrize("index", ["grid", "lbvh", "allpairs"])
 def test_interacting_gas_cuda_matches_cpu(index):
     n = 20_000 if index == "grid" else 4000
     ov = {"inflow.speed": 1.0, "inflow.speed_ratio": 2.0}

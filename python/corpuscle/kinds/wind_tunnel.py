@@ -31,7 +31,8 @@ __all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "resti
 # the default particle counts: the seed's on CUDA, the original's CPU size elsewhere
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
 
-UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)"}
+UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)",
+                    2: "an LBVH traversal stack would have overflowed (the tree is deeper than 64 levels)"}
 
 INTEGRATORS = {"forward-euler": 0, "symplectic-euler": 1}
 

@@ -79,7 +79,7 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
 }
 
 inline const std::vector<std::string>& index_names() {
-  static const std::vector<std::string> names = {GridIndex::name, AllPairsIndex::name};
+  static const std::vector<std::string> names = {GridIndex::name, LbvhIndex::name, AllPairsIndex::name};
   return names;
 }
 
@@ -88,7 +88,8 @@ std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
   const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
   if (idx == GridIndex::name) return make_with<Exec, GridIndex>(std::move(ex), r);
   if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex>(std::move(ex), r);
-  throw Error("wind-tunnel: unknown index '" + idx + "' (indexes: grid, allpairs)");
+  if (idx == LbvhIndex::name) return make_with<Exec, LbvhIndex>(std::move(ex), r);
+  throw Error("wind-tunnel: unknown index '" + idx + "' (indexes: grid, lbvh, allpairs)");
 }
 
 template <class Exec>

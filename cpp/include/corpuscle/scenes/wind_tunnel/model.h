@@ -81,6 +81,7 @@ struct SumsOp {
 };
 
 constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
+constexpr int kBadTraversal = 2;  // an LBVH traversal stack would have overflowed
 
 // the input of the next step
 struct Control {

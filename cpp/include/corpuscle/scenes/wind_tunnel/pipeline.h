@@ -9,6 +9,7 @@
 #pragma once
 #include <cmath>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "corpuscle/core/error.h"
@@ -24,6 +25,11 @@ struct GridIndex {
 // every particle against every other (O(N^2)): the reference the grid is tested against
 struct AllPairsIndex {
   static constexpr const char* name = "allpairs";
+  static constexpr bool kGrid = false;
+};
+// the seed's Karras LBVH over Morton codes (spatial/lbvh.h), gather form
+struct LbvhIndex {
+  static constexpr const char* name = "lbvh";
   static constexpr bool kGrid = false;
 };
 
@@ -54,7 +60,7 @@ class Pipeline {
   CPS_KIND_TABLES(CPS_WT_FIELDS, CPS_WT_SCALARS, CPS_WT_CONTROLS, Scene, Control)
 
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u)
-      : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)) {
+      : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)), tree_(m.lo, m.hi, 2.0f * m.radius * (1.0f + 1e-6f)) {
     const int n = m.n;
     if (n <= 0) throw Error("wind-tunnel: no particles");
     model_.resize(1);
@@ -66,6 +72,7 @@ class Pipeline {
       scat_[p].resize(n);
     }
     force_.resize(n);
+    if (std::is_same_v<Index, LbvhIndex>) tree_.resize(n);
     pressure_.resize(n);
     ndens_.resize(n);
     contacts_.resize(n);
@@ -108,7 +115,12 @@ class Pipeline {
     // 1. key and sort the current positions, gather the arrays into cell order, mark cells
     // (a collisionless gas needs no index: the arrays are copied as they are)
     // (the all-pairs reference needs no order either)
-    if (m_.collide && Index::kGrid) {
+    constexpr bool kTree = std::is_same_v<Index, LbvhIndex>;
+    if (m_.collide && kTree) {
+      tree_.sort(ex_, pos_[cur].data(), n);
+      ex_.for_each(n, ReorderStage{tree_.order(), arrays(cur, nxt)});
+      tree_.build(ex_, pos_[nxt].data());
+    } else if (m_.collide && Index::kGrid) {
       grid_.sort(ex_, pos_[cur].data(), nullptr, n);
       ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
       grid_.mark(ex_);
@@ -121,6 +133,9 @@ class Pipeline {
     if constexpr (Index::kGrid) {
       CellGridView<D> view = grid_.view(s.pos);
       ex_.for_each(n, ForceStage<CellGridView<D>>{md, g, s, view, grid_.spec()});
+    } else if constexpr (kTree) {
+      LbvhView<D> view = tree_.view(s.pos, &g->clock.bad, kBadTraversal);
+      ex_.for_each(n, ForceStage<LbvhView<D>>{md, g, s, view, grid_.spec()});
     } else {
       const float reach = 2.0f * m_.radius;
       AllPairsView<D> view{s.pos, n, reach * reach * (1.0f + 4e-6f)};
@@ -210,6 +225,7 @@ class Pipeline {
   Scene* g_;
   const Control* u_;
   CellGrid<D, Exec> grid_;
+  Lbvh<D, Exec> tree_;
   Buf<Model> model_;
   Buf<Vec2> pos_[2], vel_[2];
   Buf<int> id_[2];

@@ -4,6 +4,7 @@
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/scenes/wind_tunnel/model.h"
 #include "corpuscle/spatial/allpairs.h"
+#include "corpuscle/spatial/lbvh.h"
 
 namespace cps::wt {
 
@@ -149,6 +150,27 @@ CPS_HD CPS_INLINE float block_density(const AllPairsView<D>& all, const CellGrid
     const int dx = cj[0] - c[0], dy = cj[1] - c[1];
     count += (dx >= -1 && dx <= 1 && dy >= -1 && dy <= 1) ? 1 : 0;
   }
+  int cells = 0;
+  for (int y = c[1] - 1; y <= c[1] + 1; ++y)
+    for (int xx = c[0] - 1; xx <= c[0] + 1; ++xx)
+      cells += (xx >= 0 && xx < spec.dims[0] && y >= 0 && y < spec.dims[1]) ? 1 : 0;
+  return float(count - 1) / (float(cells) * spec.cell * spec.cell);
+}
+
+CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec2& x) {
+  int c[D], cj[D];
+  spec.cell_of(x, c);
+  float qlo[D], qhi[D];
+  for (int k = 0; k < D; ++k) {
+    qlo[k] = spec.origin[k] + float(c[k] - 1) * spec.cell - 1e-3f * spec.cell;
+    qhi[k] = spec.origin[k] + float(c[k] + 2) * spec.cell + 1e-3f * spec.cell;
+  }
+  int count = 0;
+  tree.query_box(qlo, qhi, [&](int j) {
+    spec.cell_of(tree.pos[j], cj);
+    const int dx = cj[0] - c[0], dy = cj[1] - c[1];
+    count += (dx >= -1 && dx <= 1 && dy >= -1 && dy <= 1) ? 1 : 0;
+  });
   int cells = 0;
   for (int y = c[1] - 1; y <= c[1] + 1; ++y)
     for (int xx = c[0] - 1; xx <= c[0] + 1; ++xx)
