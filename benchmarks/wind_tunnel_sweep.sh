@@ -36,6 +36,11 @@ if [ -z "${QUICK:-}" ]; then
   # the CPU backends at the CPU default (131,072) for the same table
   corpuscle bench wind-tunnel --backend serial cpu --steps 20 --repeats 3 --warmup 5 \
     --json "$OUT/bench_cpu.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
+  # the reflexive form (each pair once, atomics) at the target size, on both indexes
+  for idx in grid lbvh; do
+    corpuscle bench wind-tunnel --backend cuda --neighbors $idx --set contact.form=reflexive --steps 200 --repeats 3 \
+      --warmup 50 --json "$OUT/bench_${idx}_reflexive.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
+  done
   # the all-pairs reference index (O(N^2)) at the smallest count
   corpuscle bench wind-tunnel --backend cuda --neighbors allpairs --particles 16384 --steps 50 --repeats 3 \
     --json "$OUT/bench_allpairs_16384.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"

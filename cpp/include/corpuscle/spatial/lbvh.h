@@ -103,6 +103,7 @@ struct LbvhBuildFn {
   int* right;
   int* parent;  // 2n - 1 nodes (the root's: -1)
   int* visits;  // n - 1 counters, zeroed here for the fit
+  int* rightmost;  // n - 1: the last leaf (sorted slot) under each internal node
   CPS_HD void operator()(int i) const {
     visits[i] = 0;
     if (i == 0) parent[0] = -1;
@@ -127,6 +128,7 @@ struct LbvhBuildFn {
     const int b = hi == g + 1 ? (n - 1) + g + 1 : g + 1;
     left[i] = a;
     right[i] = b;
+    rightmost[i] = hi;
     parent[a] = i;
     parent[b] = i;
   }
@@ -176,6 +178,7 @@ struct LbvhView {
   const Vec<D>* pos = nullptr;  // sorted along the curve
   const int* left = nullptr;
   const int* right = nullptr;
+  const int* rightmost = nullptr;
   const float* boxes = nullptr;
   int n = 0;
   float radius = 0.0f;
@@ -224,6 +227,57 @@ struct LbvhView {
     }
   }
 
+  // every slot j > i whose position lies in the box: the reflexive traversal, which skips a
+  // subtree whose rightmost leaf is not to the right of i (each pair is met once, by its
+  // lower slot)
+  template <class Visit>
+  CPS_HD void query_box_after(int i, const float* qlo, const float* qhi, Visit&& visit) const {
+    if (n == 1) return;
+    int stack[kLbvhStack];
+    int sp = 0;
+    stack[sp++] = 0;
+    while (sp > 0) {
+      const int node = stack[--sp];
+      const int kids[2] = {left[node], right[node]};
+      for (int c = 1; c >= 0; --c) {
+        const int ch = kids[c];
+        if (ch >= n - 1) {
+          const int j = ch - (n - 1);
+          if (j <= i) continue;
+          bool in = true;
+          for (int k = 0; k < D; ++k) in = in && pos[j][k] >= qlo[k] && pos[j][k] <= qhi[k];
+          if (in) visit(j);
+        } else {
+          if (rightmost[ch] <= i) continue;  // no leaf right of i below it
+          const float* b = boxes + 2 * D * ch;
+          bool hit = true;
+          for (int k = 0; k < D; ++k) hit = hit && b[k] <= qhi[k] && b[D + k] >= qlo[k];
+          if (!hit) continue;
+          if (sp == kLbvhStack) {
+            atomic_cas(overflow, 0, overflow_code);
+            continue;
+          }
+          stack[sp++] = ch;
+        }
+      }
+    }
+  }
+
+  template <class Visit>
+  CPS_HD void pairs(int i, const Vec<D>& xi, Visit&& visit) const {
+    float qlo[D], qhi[D];
+    for (int k = 0; k < D; ++k) {
+      qlo[k] = xi[k] - radius;
+      qhi[k] = xi[k] + radius;
+    }
+    const float r2 = radius * radius;
+    query_box_after(i, qlo, qhi, [&](int j) {
+      Vec<D> d = xi - pos[j];
+      float rr = norm2(d);
+      if (rr < r2) visit(j, d, rr);
+    });
+  }
+
   template <class Visit>
   CPS_HD void gather(int /*i*/, const Vec<D>& xi, Visit&& visit) const {
     float qlo[D], qhi[D];
@@ -262,6 +316,7 @@ class Lbvh {
     left_.resize(m);
     right_.resize(m);
     visits_.resize(m);
+    rightmost_.resize(m);
     parent_.resize(2 * n);
     boxes_.resize(size_t(2 * D) * m);
   }
@@ -278,13 +333,14 @@ class Lbvh {
   void build(Exec& ex, const Vec<D>* sorted) {
     if (n_ < 2) return;
     ex.for_each(n_ - 1, LbvhBuildFn{codes_[1].data(), n_, left_.data(), right_.data(), parent_.data(),
-                                    visits_.data()});
+                                    visits_.data(), rightmost_.data()});
     ex.for_each(n_, LbvhFitFn<D>{sorted, n_, left_.data(), right_.data(), parent_.data(), visits_.data(),
                                  boxes_.data()});
   }
   // overflow: where a traversal raises code when its stack would overflow
   LbvhView<D> view(const Vec<D>* sorted, int* overflow, int code) {
-    return LbvhView<D>{sorted, left_.data(), right_.data(), boxes_.data(), n_, radius_, overflow, code};
+    return LbvhView<D>{sorted, left_.data(), right_.data(), rightmost_.data(), boxes_.data(), n_, radius_, overflow,
+                       code};
   }
 
  private:
@@ -294,7 +350,7 @@ class Lbvh {
   int n_ = 0;
   Buf<uint32_t> codes_[2];
   Buf<int> ids_[2];
-  Buf<int> left_, right_, parent_, visits_;
+  Buf<int> left_, right_, parent_, visits_, rightmost_;
   Buf<float> boxes_;
 };
 

@@ -129,17 +129,22 @@ class Pipeline {
     }
     ex_.mark(0);
     Arrays s = arrays(nxt, cur);
-    // 2. contacts by gather
+    // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest)
+    auto contacts = [&](const auto& view) {
+      using V = std::decay_t<decltype(view)>;
+      if (m_.collide && m_.reflexive) {
+        ex_.for_each(n, ZeroContactsStage{s});
+        ex_.for_each(n, PairStage<V>{md, g, s, view});
+      }
+      ex_.for_each(n, ForceStage<V>{md, g, s, view, grid_.spec()});
+    };
     if constexpr (Index::kGrid) {
-      CellGridView<D> view = grid_.view(s.pos);
-      ex_.for_each(n, ForceStage<CellGridView<D>>{md, g, s, view, grid_.spec()});
+      contacts(grid_.view(s.pos));
     } else if constexpr (kTree) {
-      LbvhView<D> view = tree_.view(s.pos, &g->clock.bad, kBadTraversal);
-      ex_.for_each(n, ForceStage<LbvhView<D>>{md, g, s, view, grid_.spec()});
+      contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal));
     } else {
       const float reach = 2.0f * m_.radius;
-      AllPairsView<D> view{s.pos, n, reach * reach * (1.0f + 4e-6f)};
-      ex_.for_each(n, ForceStage<AllPairsView<D>>{md, g, s, view, grid_.spec()});
+      contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});
     }
     ex_.mark(1);
     if (integrate) {

@@ -178,6 +178,55 @@ CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpe
   return float(count - 1) / (float(cells) * spec.cell * spec.cell);
 }
 
+// the reflexive form, stage 2a: the per-particle contact sums zeroed
+struct ZeroContactsStage {
+  Arrays s;
+  CPS_HD void operator()(int i) const {
+    s.force[i] = Vec2::zero();
+    s.pressure[i] = 0.0f;
+    s.contacts[i] = 0;
+  }
+};
+
+// stage 2b: each overlapping pair once, from its lower slot (view.pairs); the force on i is
+// summed locally, the reaction on j and i's sum added with atomics (float atomics: the sums'
+// order, and so their last bits, vary from run to run on parallel backends)
+template <class View>
+struct PairStage {
+  const Model* model;
+  const Scene* g;
+  Arrays s;
+  View view;
+  CPS_HD void operator()(int i) const {
+    if (halted(g)) return;
+    const Model& m = *model;
+    const Vec2 x = s.pos[i], v = s.vel[i];
+    const float r = m.radius;
+    Vec2 F = Vec2::zero();
+    float pressure = 0.0f;
+    int contacts = 0;
+    view.pairs(i, x, [&](int j, const Vec2&, float) {
+      Vec2 f;
+      float mag;
+      if (pair_contact_force<2>(m.pp, x, v, r, s.pos[j], s.vel[j], r, f, mag)) {
+        F += f;
+        pressure += mag;
+        contacts += 1;
+        atomic_add(&s.force[j][0], -f[0]);
+        atomic_add(&s.force[j][1], -f[1]);
+        atomic_add(&s.pressure[j], mag);
+        atomic_add(&s.contacts[j], 1);
+      }
+    });
+    if (contacts > 0) {
+      atomic_add(&s.force[i][0], F[0]);
+      atomic_add(&s.force[i][1], F[1]);
+      atomic_add(&s.pressure[i], pressure);
+      atomic_add(&s.contacts[i], contacts);
+    }
+  }
+};
+
 // stage 2: contact forces by gather over the index (the cell grid, or every particle for
 // the all-pairs reference; each particle sums its own: no atomics, the same sum in the same
 // order on every backend), walls, airfoil; the per-particle items of the step's reductions
@@ -199,7 +248,12 @@ struct ForceStage {
     const Vec2* vel = s.vel;
     const float r = m.radius;
     const SpringDashpot law = m.pp;
-    if (m.collide) grid.gather(i, x, [&](int j, const Vec2&, float) {
+    if (m.collide && m.reflexive) {
+      // the pairs were summed by PairStage
+      F = s.force[i];
+      pressure = s.pressure[i];
+      contacts = s.contacts[i];
+    } else if (m.collide) grid.gather(i, x, [&](int j, const Vec2&, float) {
       if (j == i) return;
       Vec2 f;
       float mag;
