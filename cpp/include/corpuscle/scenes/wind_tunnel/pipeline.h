@@ -41,9 +41,10 @@ class Pipeline {
   using ControlRecord = Control;
   static constexpr const char* kind = "wind-tunnel";
   static constexpr const char* index_name = Index::name;
-  static constexpr int kNumStages = 4;
+  static constexpr int kNumStages = 6;
   static const char* stage_name(int s) {
-    static const char* const names[] = {"sort+reorder+mark", "contacts", "reduce+finalize", "integrate"};
+    static const char* const names[] = {"keys+sort", "reorder", "build (cells / tree)", "contacts",
+                                        "reduce+finalize", "integrate"};
     return names[s];
   }
 
@@ -116,18 +117,25 @@ class Pipeline {
     // (a collisionless gas needs no index: the arrays are copied as they are)
     // (the all-pairs reference needs no order either)
     constexpr bool kTree = std::is_same_v<Index, LbvhIndex>;
+    // stages timed: 0 keys and sort, 1 reorder, 2 build (cell ranges / the tree's nodes and boxes)
     if (m_.collide && kTree) {
       tree_.sort(ex_, pos_[cur].data(), n);
+      ex_.mark(0);
       ex_.for_each(n, ReorderStage{tree_.order(), arrays(cur, nxt)});
+      ex_.mark(1);
       tree_.build(ex_, pos_[nxt].data());
     } else if (m_.collide && Index::kGrid) {
       grid_.sort(ex_, pos_[cur].data(), nullptr, n);
+      ex_.mark(0);
       ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
+      ex_.mark(1);
       grid_.mark(ex_);
     } else {
+      ex_.mark(0);
       ex_.for_each(n, ReorderStage{nullptr, arrays(cur, nxt)});
+      ex_.mark(1);
     }
-    ex_.mark(0);
+    ex_.mark(2);
     Arrays s = arrays(nxt, cur);
     // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest)
     auto contacts = [&](const auto& view) {
@@ -146,17 +154,17 @@ class Pipeline {
       const float reach = 2.0f * m_.radius;
       contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});
     }
-    ex_.mark(1);
+    ex_.mark(3);
     if (integrate) {
       // 3. the reductions and the per-scene update
       ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
-      ex_.mark(2);
+      ex_.mark(4);
       // 4. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n, IntegrateStage{md, g, u_, s});
-      ex_.mark(3);
+      ex_.mark(5);
     } else {
       ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
-      ex_.mark(2);
+      ex_.mark(4);
     }
   }
 
