@@ -27,12 +27,10 @@ corpuscle validate wind-tunnel --full --backend cuda --json > "$OUT/validate_ful
 corpuscle bench wind-tunnel --backend cuda --steps 200 --repeats 5 --warmup 50 --json "$OUT/bench_2097152.json" \
   --no-progress 2>&1 | tee "$OUT/bench.log"
 if [ -z "${QUICK:-}" ]; then
-  for idx in grid lbvh; do
-    for n in 16384 65536 262144 1048576 2097152 4194304; do
-      corpuscle bench wind-tunnel --backend cuda --neighbors $idx --particles $n --steps 200 --repeats 3 --warmup 50 \
-        --json "$OUT/bench_${idx}_$n.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
-    done
-  done
+  # the sweep: every count with each index (one table, stage times per row)
+  corpuscle bench wind-tunnel --backend cuda --neighbors grid,lbvh \
+    --particles 16384,65536,262144,1048576,2097152,4194304 --steps 200 --repeats 3 --warmup 50 \
+    --json "$OUT/bench_sweep.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
   # the CPU backends at the CPU default (131,072) for the same table
   corpuscle bench wind-tunnel --backend serial cpu --steps 20 --repeats 3 --warmup 5 \
     --json "$OUT/bench_cpu.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"

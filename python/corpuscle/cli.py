@@ -932,7 +932,8 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", metavar="SCENE|FILE.toml", help="a built-in scene name or a scene file")
     p.add_argument("--backend", nargs="+", choices=BACKENDS, metavar="B",
                    help="backends to time: serial, cpu, cuda (default: every usable one)")
-    p.add_argument("--particles", metavar="N", help=_particles_help())
+    p.add_argument("--particles", metavar="N[,N...]",
+                   help=_particles_help() + "; a comma-separated list sweeps them (16384,65536,...)")
     p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override any scene key (repeatable)")
     _add_engine_options(p)
     p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
@@ -950,8 +951,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     repeats = _int_option("--repeats", args.repeats, minimum=1)
     warmup = _int_option("--warmup", args.warmup, minimum=0)
     args.device = _int_option("--device", args.device, minimum=0)
-    args.particles = _int_option("--particles", args.particles)
+    counts = [None]
+    if args.particles is not None:
+        counts = [_int_option("--particles", t, minimum=1) for t in str(args.particles).split(",")]
+    indexes = [None] if not args.neighbors else [t.strip() for t in str(args.neighbors).split(",")]
+    if args.neighbors and any(not t for t in indexes):
+        raise UsageError(f"--neighbors {args.neighbors!r}: an empty index name")
+    args.particles = counts[0]
     scene = _load_with_options(args, {})
+    scenes = [scene]
+    for n in counts[1:]:
+        args.particles = n
+        scenes.append(_load_with_options(args, {}))
     if args.json:
         parent = pathlib.Path(args.json).parent
         if not parent.is_dir():
@@ -969,14 +980,16 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if _progress_enabled(argparse.Namespace(no_progress=args.no_progress)):
         from tqdm import tqdm
 
-        bar = tqdm(total=len(backends) * repeats, unit="repeat", file=sys.stderr, leave=False)
+        bar = tqdm(total=len(backends) * repeats * len(scenes) * len(indexes), unit="repeat", file=sys.stderr,
+                   leave=False)
     rows: list[dict[str, Any]] = []
+    runs = [(sc, idx, b) for sc in scenes for idx in indexes for b in backends]
     try:
-        for backend in backends:
+        for scene, index, backend in runs:
             if bar is not None:
                 bar.set_description(backend)
             t_init = time.perf_counter()
-            sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
+            sim = Simulation.from_scene(scene, backend=backend, neighbors=index, device=args.device)
             init_seconds = time.perf_counter() - t_init
             if warmup:
                 sim.step(warmup)
@@ -1027,23 +1040,32 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def _print_bench(rows: list[dict[str, Any]]) -> None:
     """The benchmark table, then the per-stage table of each backend that has one."""
+    def serial_of(r):
+        return next((s for s in rows if s["backend"] == "serial" and s["particles"] == r["particles"]
+                     and s.get("neighbors") == r.get("neighbors")), None)
+
     serial = next((r for r in rows if r["backend"] == "serial"), None)
+    sweep = len({(r["particles"], r.get("neighbors")) for r in rows}) > 1
     head = f"{'backend':<8} {'particles':>10} {'init(s)':>8} {'steps/s':>12} {'particle-steps/s':>18}"
-    print(head + (f" {'speedup':>9}" if serial else ""))
+    print(head + (f" {'speedup':>9}" if serial else "") + ("  neighbors" if sweep else ""))
     for r in rows:
         init = r.get("init_seconds")
         init_text = f"{init:8.3f}" if isinstance(init, (int, float)) else f"{'':>8}"
         line = (f"{r['backend']:<8} {r['particles']:>10,} {init_text} {_fmt_rate(r['steps_per_second']):>12} "
                 f"{_fmt_rate(r['particle_steps_per_second']):>18}")
         if serial:
-            line += f" {r['steps_per_second'] / serial['steps_per_second']:>8.1f}x"
+            base = serial_of(r)
+            line += f" {r['steps_per_second'] / base['steps_per_second']:>8.1f}x" if base else f" {'':>9}"
+        if sweep:
+            line += f"  {r.get('neighbors') or ''}"
         print(line)
     for r in rows:
         stages = r.get("stages")
         if not stages:
             continue
         total = sum(stages.values())
-        print(f"\n{r['backend']} stages (ms per step, {r['device']})")
+        what = f"{r['backend']}, {r['particles']:,} particles" + (f", {r['neighbors']}" if r.get("neighbors") else "")
+        print(f"\n{what} stages (ms per step, {r['device']})")
         width = max(len(k) for k in stages)
         for name, ms in stages.items():
             share = 100.0 * ms / total if total > 0 else 0.0
