@@ -119,3 +119,19 @@ def test_reflexive_pairs_conserve_momentum(index):
     external = np.asarray(sc["wall_force"], dtype=np.float64) - np.asarray(sc["airfoil_force"], dtype=np.float64)
     assert np.abs(f.sum(axis=0) - external).max() <= 1e-5 * pp_scale
     assert (s.field("contacts") > 0).sum() > 100
+
+
+def test_bench_sweeps_particles_and_indexes(tmp_path):
+    import json
+
+    from cli_script import corpuscle
+
+    out = tmp_path / "b.json"
+    r = corpuscle("bench", "wind-tunnel", "--backend", "serial", "--particles", "600,1200", "--neighbors",
+                  "grid,lbvh", "--steps", "2", "--repeats", "1", "--warmup", "0", "--json", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(out.read_text())
+    assert [(row["particles"], row["neighbors"]) for row in rows] == [(600, "grid"), (600, "lbvh"), (1200, "grid"),
+                                                                       (1200, "lbvh")]
+    assert all(row["steps_per_second"] > 0 for row in rows)
+    assert "neighbors" in r.stdout.splitlines()[0]
