@@ -135,3 +135,21 @@ def test_bench_sweeps_particles_and_indexes(tmp_path):
                                                                        (1200, "lbvh")]
     assert all(row["steps_per_second"] > 0 for row in rows)
     assert "neighbors" in r.stdout.splitlines()[0]
+
+
+@pytest.mark.parametrize("index,form", [("lbvh", "gather"), ("lbvh", "reflexive")])
+def test_no_particle_inside_the_airfoil_or_through_a_wall_with_the_tree(index, form):
+    s = Simulation.from_scene(load_scene("wind-tunnel"), backend="cpu", particles=2500, neighbors=index,
+                              overrides={"inflow.speed": 2.0, "inflow.speed_ratio": 2.0, "contact.form": form,
+                                         "airfoil.shape": "naca0012", "airfoil.angle_of_attack": 15.0})
+    lo, hi = np.asarray(s.params["channel_lo"]), np.asarray(s.params["channel_hi"])
+    hits = 0
+    for _ in range(8):
+        s.step(25)
+        p = s.positions.astype(np.float64)
+        assert np.all((p >= lo) & (p <= hi))
+        d = wt.signed_distance(s.info["airfoil"], p)
+        assert d.min() > 0.0
+        hits += int((d < s.radius).sum())
+    assert hits > 0 and s.state()["bad"] == 0
+    assert np.array_equal(np.sort(s.field("id")), np.arange(2500))
