@@ -35,9 +35,9 @@ if [ -z "${QUICK:-}" ]; then
   corpuscle bench wind-tunnel --backend serial cpu --steps 20 --repeats 3 --warmup 5 \
     --json "$OUT/bench_cpu.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
   # the reflexive form (each pair once, atomics) at the target size, on both indexes
-  for idx in grid lbvh; do
-    corpuscle bench wind-tunnel --backend cuda --neighbors $idx --set contact.form=reflexive --steps 200 --repeats 3 \
-      --warmup 50 --json "$OUT/bench_${idx}_reflexive.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
+  for form in reflexive reflexive-warp; do
+    corpuscle bench wind-tunnel --backend cuda --neighbors grid,lbvh --set contact.form=$form --steps 200 --repeats 3 \
+      --warmup 50 --json "$OUT/bench_$form.json" --no-progress 2>&1 | tee -a "$OUT/bench.log"
   done
   # the all-pairs reference index (O(N^2)) at the smallest count
   corpuscle bench wind-tunnel --backend cuda --neighbors allpairs --particles 16384 --steps 50 --repeats 3 \

@@ -59,9 +59,10 @@ def test_validation_on_cuda_passes_at_ci_size():
     assert abs(m["ca"] - th["ca"]) <= vwt.Z * m["ca_se"]
 
 
-@pytest.mark.parametrize("index", ["grid", "lbvh"])
-def test_reflexive_form_cuda_matches_cpu_gather(index):
-    ov = {"inflow.speed": 1.0, "contact.form": "reflexive"}
+@pytest.mark.parametrize("index,form", [("grid", "reflexive"), ("lbvh", "reflexive"), ("lbvh", "reflexive-warp"),
+                                        ("grid", "reflexive-warp")])
+def test_reflexive_form_cuda_matches_cpu_gather(index, form):
+    ov = {"inflow.speed": 1.0, "contact.form": form}
     a = Simulation.from_scene(load_scene("wind-tunnel"), backend="cpu", particles=20_000, neighbors="grid",
                               overrides={"inflow.speed": 1.0})
     b = Simulation.from_scene(load_scene("wind-tunnel"), backend="cuda", particles=20_000, neighbors=index, overrides=ov)

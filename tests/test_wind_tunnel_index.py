@@ -39,7 +39,7 @@ def test_indexes_are_registered():
 
 @pytest.mark.parametrize("other,form,backend", [("allpairs", "gather", "serial"), ("lbvh", "gather", "serial"),
                                                 ("grid", "reflexive", "cpu"), ("lbvh", "reflexive", "cpu"),
-                                                ("allpairs", "reflexive", "serial")])
+                                                ("allpairs", "reflexive", "serial"), ("lbvh", "reflexive-warp", "cpu")])
 def test_grid_and_the_other_indexes_give_the_same_contacts_and_forces(other, form, backend):
     """Every index in the gather form, and the reflexive form (each pair once, atomics; on
     OpenMP the atomics race as on the GPU), against the grid's gather."""

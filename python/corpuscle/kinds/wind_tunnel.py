@@ -35,6 +35,7 @@ UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/i
                     2: "an LBVH traversal stack would have overflowed (the tree is deeper than 64 levels)"}
 
 INTEGRATORS = {"forward-euler": 0, "symplectic-euler": 1}
+CONTACT_FORMS = {"gather": 0, "reflexive": 1, "reflexive-warp": 2}
 
 _K = KeySpec
 WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
@@ -54,8 +55,9 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "contact.enabled": _K("bool", True, "", doc="particle-particle contacts; false: a collisionless gas "
                           "(only walls and airfoil act, as in free-molecular flow)"),
     "contact.form": _K("enum", "gather", "", doc="gather (each particle sums its own contacts: no atomics, "
-                       "reproducible) or reflexive (each pair once, the reaction added by atomics; the seed's)",
-                       choices=("gather", "reflexive")),
+                       "reproducible), reflexive (each pair once, the reaction added by atomics; the seed's) or "
+                       "reflexive-warp (the same with warp-aggregated atomics, __match_any_sync, on CUDA)",
+                       choices=tuple(CONTACT_FORMS)),
     "contact.k": _K("float", 10000.0, "N/m", 0.0, 1e12, "particle-particle spring stiffness", lo_open=True),
     "contact.c": _K("float", 50.0, "N·s/m", 0.0, 1e9, "particle-particle damping (unless contact.restitution)"),
     "contact.restitution": _K("float", 0.0, "", 0.0, 1.0,
@@ -266,7 +268,7 @@ class WindTunnel(Kind):
             "channel_lo": lo.tolist(), "channel_hi": hi.tolist(), "speed": float(v["inflow.speed"]),
             "thermal": thermal_ratio(v) / math.sqrt(2.0), "collide": int(bool(v["contact.enabled"])),
             "recycle_scattered": int(bool(v["wall.recycle_scattered"])),
-            "reflexive": int(v["contact.form"] == "reflexive"), "dt_fraction": float(v["timestep.fraction"]),
+            "reflexive": CONTACT_FORMS[v["contact.form"]], "dt_fraction": float(v["timestep.fraction"]),
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }

@@ -28,7 +28,8 @@ inline Model build_model(const ParamSource& p, const ArraySource* arrays) {
   m.radius = p.f("radius");
   m.mass = p.f("mass");
   m.collide = p.has("collide") ? int(p.integer("collide") != 0) : 1;
-  m.reflexive = p.has("reflexive") ? int(p.integer("reflexive") != 0) : 0;
+  m.reflexive = p.has("reflexive") ? int(p.integer("reflexive")) : 0;
+  if (m.reflexive < 0 || m.reflexive > 2) throw Error("wind-tunnel: reflexive must be 0, 1 or 2");
   m.recycle_scattered = p.has("recycle_scattered") ? int(p.integer("recycle_scattered") != 0) : 0;
   m.pp = SpringDashpot{p.f("k"), p.f("c")};
   m.wall = SpringDashpot{p.f("k_wall"), p.f("c_wall")};

@@ -27,7 +27,8 @@ struct Model {
   float radius, mass;
   int collide;           // particle-particle contacts on (1) or off (0: a collisionless gas)
   int reflexive;         // 0: gather (each particle sums its own contacts: reproducible);
-                         // 1: reflexive (each pair once, the reaction added by atomics)
+                         // 1: reflexive (each pair once, the reaction added by atomics);
+                         // 2: reflexive with warp-aggregated atomics on the device
   int recycle_scattered; // 1: a particle that touched the airfoil re-enters at the inflow when it
                          // reaches a wall (walls send no scattered particle back: free-molecular
                          // validation); 0: walls reflect every particle

@@ -188,6 +188,42 @@ struct ZeroContactsStage {
   }
 };
 
+// the reaction (fx, fy), its magnitude and one contact added to particle j. Warp-aggregated
+// (the seed's option, on the device): the lanes of a warp adding to the same j at this moment
+// (__match_any_sync over j) sum their values by shuffles and one of them adds the sum, so a
+// particle hit by several lanes takes one atomic per component instead of one per lane. On the
+// CPU, and with aggregate off, one atomic each.
+CPS_HD CPS_INLINE void add_reaction(const Arrays& s, int j, float fx, float fy, float mag, bool aggregate) {
+#ifdef __CUDA_ARCH__
+  if (aggregate) {
+    const unsigned active = __activemask();
+    const unsigned peers = __match_any_sync(active, j);
+    const int lane = int(threadIdx.x & 31u);
+    float sx = 0.0f, sy = 0.0f, sm = 0.0f;
+    unsigned rest = peers;
+    while (rest) {  // every peer runs the same loop: the shuffles see the whole group
+      const int src = __ffs(int(rest)) - 1;
+      rest &= rest - 1u;
+      sx += __shfl_sync(peers, fx, src);
+      sy += __shfl_sync(peers, fy, src);
+      sm += __shfl_sync(peers, mag, src);
+    }
+    if (lane == __ffs(int(peers)) - 1) {
+      atomicAdd(&s.force[j][0], sx);
+      atomicAdd(&s.force[j][1], sy);
+      atomicAdd(&s.pressure[j], sm);
+      atomicAdd(&s.contacts[j], __popc(peers));
+    }
+    return;
+  }
+#endif
+  (void)aggregate;
+  atomic_add(&s.force[j][0], fx);
+  atomic_add(&s.force[j][1], fy);
+  atomic_add(&s.pressure[j], mag);
+  atomic_add(&s.contacts[j], 1);
+}
+
 // stage 2b: each overlapping pair once, from its lower slot (view.pairs); the force on i is
 // summed locally, the reaction on j and i's sum added with atomics (float atomics: the sums'
 // order, and so their last bits, vary from run to run on parallel backends)
@@ -212,10 +248,7 @@ struct PairStage {
         F += f;
         pressure += mag;
         contacts += 1;
-        atomic_add(&s.force[j][0], -f[0]);
-        atomic_add(&s.force[j][1], -f[1]);
-        atomic_add(&s.pressure[j], mag);
-        atomic_add(&s.contacts[j], 1);
+        add_reaction(s, j, -f[0], -f[1], mag, m.reflexive == 2);
       }
     });
     if (contacts > 0) {
