@@ -339,7 +339,9 @@ class WindTunnel(Kind):
     @staticmethod
     def _place_uniform(n, radius, lo, hi, poly, params, rng):
         pts = np.empty((0, 2))
-        a, b = lo + radius, hi - radius
+        # a radius off the walls; from the inflow to the outflow in x, as the stream fills it
+        # (a gap there would travel down the channel as a hole in the stream)
+        a, b = lo + np.array([0.0, radius]), hi - np.array([0.0, radius])
         box_lo, box_hi = poly.min(axis=0) - radius, poly.max(axis=0) + radius
         while len(pts) < n:
             p = rng.uniform(a, b, (int(1.2 * (n - len(pts))) + 16, 2))

@@ -36,7 +36,10 @@ body scatters a little less than a hard one: the axial force of the corners is a
 Measured: the time-averaged force on the body from the block means the kind keeps (64
 blocks over the measurement window), rotated into body axes, over q c with q = rho U^2 / 2
 and rho = m n_inf, n_inf the density of free-stream (never scattered) particles counted in
-a strip ahead of the body at every sample. The tolerance of each check is 4 standard
+a strip ahead of the body every 5 ms, taken a transit time (strip to body at U) before the
+force window: the stream's density drifts while the channel settles (the body's shadow holds
+fewer particles than the uniform start, and the inflow, fed by the outflow, rings), and the
+body feels the density that passed the strip that much earlier. The tolerance of each check is 4 standard
 errors: the batch-means standard error of the force coefficient (the blocks are far longer
 than the contact time, so they are independent) and the standard error of n_inf (batch
 means over the samples), combined; a correct simulation fails a check with probability
@@ -190,20 +193,25 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
     lo, hi = np.asarray(sim.params["channel_lo"]), np.asarray(sim.params["channel_hi"])
     r = float(sim.params["radius"])
     strip_hi = float(poly[:, 0].min()) - r - 0.02
-    strip_area = (strip_hi - lo[0]) * (hi[1] - lo[1] - 2.0 * r)
+    strip_lo = float(lo[0])
+    strip_area = (strip_hi - strip_lo) * (hi[1] - lo[1] - 2.0 * r)
     if strip_hi - lo[0] < 0.05:
         raise ValueError(f"no free-stream strip ahead of the body at alpha = {alpha}")
     chunk = max(1, int(round(0.005 / num["dt"])))  # a density sample every 5 ms
-    samples = []
+
+    def strip_density():
+        x = sim.positions[:, 0]
+        fresh = sim.field("scattered") == 0
+        return np.count_nonzero(fresh & (x > strip_lo) & (x < strip_hi)) / strip_area
+
+    times, dens = [0.0], [strip_density()]
     while True:
         sim.step(chunk)
         s = sim.state()
         if s["bad"]:
             raise RuntimeError(f"the validation run went unstable at step {s['bad_step']}")
-        if s["time"] >= T_START:
-            x = sim.positions[:, 0]
-            fresh = sim.field("scattered") == 0
-            samples.append(np.count_nonzero(fresh & (x < strip_hi)) / strip_area)
+        times.append(float(s["time"]))
+        dens.append(strip_density())
         if s["done"]:
             break
     sc = sim.scalars()
@@ -212,16 +220,33 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
         raise RuntimeError(f"only {nb} force blocks were closed")
     lift = np.asarray(sc["blocks_lift"], dtype=np.float64)[:nb]
     drag = np.asarray(sc["blocks_drag"], dtype=np.float64)[:nb]
-    samples = np.asarray(samples, dtype=np.float64)
+    # The stream reaching the body at time t passed the strip a transit time tau earlier (the
+    # free-stream density is not constant while the channel settles: the body's shadow holds
+    # fewer particles than the start's uniform gas, and the inflow, fed by the outflow, rings
+    # until it has refilled): the density over the force window [t0, t1] is the strip's over
+    # [t0 - tau, t1 - tau], with tau from the strip's centre to the body's at U (the start's
+    # gas, uniform and moving with the stream, stands for times before 0).
+    times, dens = np.asarray(times), np.asarray(dens, dtype=np.float64)
+    t0 = T_START
+    t1 = t0 + nb * float(sc["block_len"])
+    tau = (float(poly[:, 0].mean()) - 0.5 * (strip_lo + strip_hi)) / SPEED
+    tq = times[(times >= t0) & (times <= t1)] - tau
+    samples = np.interp(tq, times, dens)
     n_inf = float(samples.mean())
     nbatch = 16
     usable = len(samples) // nbatch * nbatch
     batches = samples[:usable].reshape(nbatch, -1).mean(axis=1)
     n_se = float(batches.std(ddof=1) / math.sqrt(nbatch))
+    # the counting error: the strip holds count particles, renewed every w / U; the lagged
+    # window may lie (partly) before t = 0, where the start's gas is the one sample there is
+    width = strip_hi - strip_lo
+    count = n_inf * strip_area
+    renewals = 1.0 + max(0.0, min(t1 - tau, t1 - t0)) * SPEED / width
+    n_se = max(n_se, n_inf / math.sqrt(max(count * renewals, 1.0)))
     q = 0.5 * n_inf * float(sim.params["mass"]) * SPEED ** 2
     cl_b, cd_b = lift / (q * CHORD), drag / (q * CHORD)
     cn_b, ca_b = fm.body_axes(cl_b, cd_b, alpha)
-    out: dict[str, Any] = {"n_inf": n_inf, "n_inf_rel_se": n_se / n_inf, "blocks": nb, "polygon": poly,
+    out: dict[str, Any] = {"density_series": (times, dens), "tau": tau, "n_inf": n_inf, "n_inf_rel_se": n_se / n_inf, "blocks": nb, "polygon": poly,
                            "radius": r, "pushouts": int(sc["pushouts"]), "steps": int(sc["step"]),
                            "restitution": discrete_restitution(restitution, num["wdt"])}
     for name, b in (("cl", cl_b), ("cd", cd_b), ("cn", cn_b), ("ca", ca_b)):
