@@ -197,7 +197,7 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
     strip_area = (strip_hi - strip_lo) * (hi[1] - lo[1] - 2.0 * r)
     if strip_hi - lo[0] < 0.05:
         raise ValueError(f"no free-stream strip ahead of the body at alpha = {alpha}")
-    chunk = max(1, int(round(0.005 / num["dt"])))  # a density sample every 5 ms
+    chunk = max(1, int(round(min(0.005, window / 64.0) / num["dt"])))  # a density sample every 5 ms (or window/64)
 
     def strip_density():
         x = sim.positions[:, 0]
@@ -209,7 +209,7 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
         sim.step(chunk)
         s = sim.state()
         if s["bad"]:
-            raise RuntimeError(f"the validation run went unstable at step {s['bad_step']}")
+            raise ValueError(f"the validation run went unstable at step {s['bad_step']} (reason {s['bad']})")
         times.append(float(s["time"]))
         dens.append(strip_density())
         if s["done"]:
@@ -217,7 +217,7 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
     sc = sim.scalars()
     nb = int(sc["nblocks"])
     if nb < 8:
-        raise RuntimeError(f"only {nb} force blocks were closed")
+        raise ValueError(f"--time {window:g}: only {nb} force blocks were closed; give a longer window")
     lift = np.asarray(sc["blocks_lift"], dtype=np.float64)[:nb]
     drag = np.asarray(sc["blocks_drag"], dtype=np.float64)[:nb]
     # The stream reaching the body at time t passed the strip a transit time tau earlier (the
@@ -233,10 +233,13 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
     tq = times[(times >= t0) & (times <= t1)] - tau
     samples = np.interp(tq, times, dens)
     n_inf = float(samples.mean())
-    nbatch = 16
-    usable = len(samples) // nbatch * nbatch
-    batches = samples[:usable].reshape(nbatch, -1).mean(axis=1)
-    n_se = float(batches.std(ddof=1) / math.sqrt(nbatch))
+    nbatch = min(16, len(samples) // 2)
+    if nbatch >= 2:
+        usable = len(samples) // nbatch * nbatch
+        batches = samples[:usable].reshape(nbatch, -1).mean(axis=1)
+        n_se = float(batches.std(ddof=1) / math.sqrt(nbatch))
+    else:
+        n_se = 0.0
     # the counting error: the strip holds count particles, renewed every w / U; the lagged
     # window may lie (partly) before t = 0, where the start's gas is the one sample there is
     width = strip_hi - strip_lo
