@@ -260,8 +260,7 @@ def test_hydrostatic_column_holds():
 
 
 def test_validate_dam_break_ci_size(tmp_path):
-    proc = corpuscle("validate", "dam-break", "--backend", "serial", "--plot", tmp_path / "front.png", "--json",
-                     timeout=300)
+    proc = corpuscle("validate", "dam-break", "--backend", "serial", "--plot", tmp_path / "front.png", timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == "PASS"
     assert (tmp_path / "front.png").stat().st_size > 1000

@@ -30,8 +30,8 @@ def channel(sim):
     return np.asarray(sim.params["channel_lo"]), np.asarray(sim.params["channel_hi"])
 
 
-def test_registered_with_the_grid_index():
-    assert dict(_core.kinds())["wind-tunnel"] == ["grid"]
+def test_registered_with_its_indexes():
+    assert dict(_core.kinds())["wind-tunnel"] == ["grid", "lbvh", "allpairs"]
     sim = make(particles=500)
     assert sim.kind.dim == 2 and sim.n_particles == 500
     assert sim.positions.shape == (500, 2)

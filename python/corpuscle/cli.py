@@ -949,7 +949,7 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", nargs="+", choices=BACKENDS, metavar="B",
                    help="backends to time: serial, cpu, cuda (default: every usable one)")
     p.add_argument("--particles", metavar="N", nargs="+",
-                   help=_particles_help() + "; several values: a sweep over them")
+                   help=_particles_help() + "; several values (or a comma-separated list): a sweep over them")
     p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override any scene key (repeatable)")
     p.add_argument("--neighbors", metavar="INDEX", nargs="+",
                    help="neighbour search(es) to time (the kind's indexes, see `corpuscle info`; several: a sweep)")
@@ -974,8 +974,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     repeats = _int_option("--repeats", args.repeats, minimum=1)
     warmup = _int_option("--warmup", args.warmup, minimum=0)
     args.device = _int_option("--device", args.device, minimum=0)
-    sizes = [_int_option("--particles", v, minimum=1) for v in args.particles] if args.particles else [None]
-    indexes = list(dict.fromkeys(args.neighbors)) if args.neighbors else [None]
+    sizes = [None]
+    if args.particles:
+        sizes = [_int_option("--particles", t, minimum=1) for v in args.particles for t in str(v).split(",")]
+    indexes = [None]
+    if args.neighbors:
+        names = [t.strip() for v in args.neighbors for t in str(v).split(",")]
+        if any(not t for t in names):
+            raise UsageError(f"--neighbors {' '.join(args.neighbors)!r}: an empty index name")
+        indexes = list(dict.fromkeys(names))
     scenes = []
     for size in sizes:
         args.particles = size
@@ -1111,7 +1118,8 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
         if not stages:
             continue
         total = sum(stages.values())
-        print(f"\n{r['backend']} {r.get('neighbors')} {r['particles']:,} stages (ms per step, {r['device']})")
+        what = f"{r['backend']}, {r['particles']:,} particles" + (f", {r['neighbors']}" if r.get("neighbors") else "")
+        print(f"\n{what} stages (ms per step, {r['device']})")
         width = max(len(k) for k in stages)
         for name, ms in stages.items():
             share = 100.0 * ms / total if total > 0 else 0.0
@@ -1141,11 +1149,14 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
     module = validation.load(args.name)  # unknown name: ValueError, one line, exit 2
     sub = _Parser(prog=f"{PROG} validate {args.name}", description=(module.__doc__ or "").strip().splitlines()[0])
-    sub.add_argument("--json", action="store_true", help="print the checks as JSON (after the table)")
+    sub.add_argument("--json", action="store_true", help="print the checks as JSON (and nothing else) on stdout")
     module.add_arguments(sub)
     opts = sub.parse_args(args.options)  # bad options exit 2 with one line
-    want_json = bool(args.json or opts.json)
     checks = module.run(opts)
+    ok = all(c.passed for c in checks) and bool(checks)
+    if args.json or opts.json:
+        print(json.dumps(validation.as_dicts(checks), indent=2, default=_json_default))
+        return EXIT_OK if ok else 1
     print()
     rows = [(c.name, f"{c.measured:.6g}", f"{c.reference:.6g}", f"{c.measured - c.reference:+.4g}",
              f"{c.tolerance:.4g}" + (f" {c.unit}" if c.unit else ""), "PASS" if c.passed else "FAIL") for c in checks]
@@ -1154,15 +1165,24 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     print("  ".join(str(h).ljust(w) if k == 0 else str(h).rjust(w) for k, (h, w) in enumerate(zip(head, widths))))
     for r in rows:
         print("  ".join(str(x).ljust(w) if k == 0 else str(x).rjust(w) for k, (x, w) in enumerate(zip(r, widths))))
-    ok = all(c.passed for c in checks) and bool(checks)
-    if want_json:
-        print(json.dumps(validation.as_dicts(checks), indent=2, default=_json_default))
+    for c in checks:
+        if c.detail:
+            print(f"  {c.name}: {c.detail}")
     print("PASS" if ok else "FAIL")
     return EXIT_OK if ok else 1
 
 
 register(Command("validate", "run a validation case and check it against its reference (PASS/FAIL)",
                  _configure_validate, _cmd_validate))
+
+
+def _register_polar() -> None:
+    from . import polar
+
+    register(Command("polar", polar.HELP, polar.configure_parser, polar.run_command, polar.DESCRIPTION))
+
+
+_register_polar()
 
 
 def _register_viz() -> None:

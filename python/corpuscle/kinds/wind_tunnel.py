@@ -35,9 +35,11 @@ MAX_PITCH = 45.0
 
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
 
-UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)"}
+UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)",
+                    2: "an LBVH traversal stack would have overflowed (the tree is deeper than 64 levels)"}
 
 INTEGRATORS = {"forward-euler": 0, "symplectic-euler": 1}
+CONTACT_FORMS = {"gather": 0, "reflexive": 1, "reflexive-warp": 2}
 
 _K = KeySpec
 WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
@@ -54,6 +56,12 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
                              lo_open=True),
     "gas.mass": _K("float", 1.0, "kg", 0.0, 1e6, "particle mass (the seed's: 1)", lo_open=True),
     # contact laws: spring k on the overlap, damper c on the normal approach speed
+    "contact.enabled": _K("bool", True, "", doc="particle-particle contacts; false: a collisionless gas "
+                          "(only walls and airfoil act, as in free-molecular flow)"),
+    "contact.form": _K("enum", "gather", "", doc="gather (each particle sums its own contacts: no atomics, "
+                       "reproducible), reflexive (each pair once, the reaction added by atomics; the seed's) or "
+                       "reflexive-warp (the same with warp-aggregated atomics, __match_any_sync, on CUDA)",
+                       choices=tuple(CONTACT_FORMS)),
     "contact.k": _K("float", 10000.0, "N/m", 0.0, 1e12, "particle-particle spring stiffness", lo_open=True),
     "contact.c": _K("float", 50.0, "N·s/m", 0.0, 1e9, "particle-particle damping (unless contact.restitution)"),
     "contact.restitution": _K("float", 0.0, "", 0.0, 1.0,
@@ -61,6 +69,9 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "wall.k": _K("float", 10000.0, "N/m", 0.0, 1e12, "particle-wall spring stiffness", lo_open=True),
     "wall.c": _K("float", 50.0, "N·s/m", 0.0, 1e9, "particle-wall damping (unless wall.restitution)"),
     "wall.restitution": _K("float", 0.0, "", 0.0, 1.0, "particle-wall restitution; > 0 sets wall.c"),
+    "wall.recycle_scattered": _K("bool", False, "", doc="a particle that touched the airfoil re-enters at the "
+                                 "inflow when it reaches a wall, so the walls send no scattered particle back "
+                                 "(the free-molecular validation); false: the walls reflect every particle"),
     "wing.k": _K("float", 50000.0, "N/m", 0.0, 1e12, "particle-airfoil spring stiffness", lo_open=True),
     "wing.c": _K("float", 50.0, "N·s/m", 0.0, 1e9, "particle-airfoil damping (unless wing.restitution)"),
     "wing.restitution": _K("float", 0.0, "", 0.0, 1.0, "particle-airfoil restitution; > 0 sets wing.c"),
@@ -71,6 +82,9 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "inflow.speed": _K("float", 0.05, "m/s", 0.0, 1e4, "free-stream speed U (along +x)", lo_open=True),
     "inflow.thermal": _K("float", 0.0, "", 0.0, 100.0,
                          "thermal speed sqrt(2 kT / m) over U (1 / the speed ratio); 0: the seed's cold beam"),
+    "inflow.speed_ratio": _K("float", 0.0, "", 0.0, 1e6,
+                             "speed ratio S = U / sqrt(2 kT / m) of the Maxwellian free stream; > 0 sets "
+                             "inflow.thermal = 1 / S (0: inflow.thermal decides)"),
     # the airfoil
     "airfoil.shape": _K("str", "e398", "", doc="'e398' (shipped), a NACA 4-digit code ('naca2412'), "
                         "'flat-plate', or the path of a Selig/Lednicer .dat file"),
@@ -102,11 +116,24 @@ def _channel_room(values: dict[str, Any], arrays) -> None:
                          f"inside the channel ({_fmt_value(L)} x {_fmt_value(H)} centred on the origin)")
 
 
+def _one_thermal(values: dict[str, Any], arrays) -> None:
+    S, th = values["inflow.speed_ratio"], values["inflow.thermal"]
+    if S > 0 and th > 0 and abs(th * S - 1.0) > 1e-9:
+        raise SceneError(f"inflow.speed_ratio = {_fmt_value(S)} and inflow.thermal = {_fmt_value(th)} disagree "
+                         f"(thermal is 1 / speed_ratio): set one of them")
+
+
+def thermal_ratio(values: dict[str, Any]) -> float:
+    """sqrt(2 kT / m) / U of the free stream (0: the cold beam)."""
+    S = float(values["inflow.speed_ratio"])
+    return 1.0 / S if S > 0 else float(values["inflow.thermal"])
+
+
 SCHEMA = SceneKind(
     name="wind-tunnel",
     description="2-D soft-sphere gas past an airfoil: lift, drag and moment (seed 000)",
     keys=WIND_TUNNEL_KEYS,
-    checks=[_channel_room],
+    checks=[_channel_room, _one_thermal],
 )
 
 
@@ -192,9 +219,10 @@ class WindTunnel(Kind):
     dim = 2
     particle_key = "gas.particles"
     unstable_reasons = UNSTABLE_REASONS
-    frame_fields = ("position", "pressure")
-    units = {"position": "m", "velocity": "m/s", "pressure": "N/m", "force": "N/m", "lift": "N/m", "drag": "N/m",
-             "moment": "N", "pitch": "deg", "kinetic_energy": "J", "vmax": "m/s", "airfoil_contacts": "count"}
+    frame_fields = ("position", "pressure", "number_density")
+    units = {"position": "m", "velocity": "m/s", "pressure": "N/m", "number_density": "1/m^2", "force": "N/m",
+             "lift": "N/m", "drag": "N/m", "moment": "N", "pitch": "deg", "kinetic_energy": "J", "vmax": "m/s",
+             "airfoil_contacts": "count"}
 
     def summary(self, result: dict[str, Any]) -> tuple[list[str], dict[str, Any]]:
         lines = []
@@ -243,7 +271,9 @@ class WindTunnel(Kind):
             "k": laws["contact"][0], "c": laws["contact"][1], "k_wall": laws["wall"][0], "c_wall": laws["wall"][1],
             "k_wing": laws["wing"][0], "c_wing": laws["wing"][1],
             "channel_lo": lo.tolist(), "channel_hi": hi.tolist(), "speed": float(v["inflow.speed"]),
-            "thermal": float(v["inflow.thermal"]) / math.sqrt(2.0), "dt_fraction": float(v["timestep.fraction"]),
+            "thermal": thermal_ratio(v) / math.sqrt(2.0), "collide": int(bool(v["contact.enabled"])),
+            "recycle_scattered": int(bool(v["wall.recycle_scattered"])),
+            "reflexive": CONTACT_FORMS[v["contact.form"]], "dt_fraction": float(v["timestep.fraction"]),
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
@@ -270,8 +300,12 @@ class WindTunnel(Kind):
     @staticmethod
     def _place(n, radius, lo, hi, poly, params, seed):
         """A jittered square lattice over the channel, a radius clear of the walls and the
-        airfoil, n of its sites drawn at random; velocities are the free stream."""
+        airfoil, n of its sites drawn at random; velocities are the free stream. A
+        collisionless gas (contact.enabled = false) is a uniform random (Poisson) gas instead:
+        its particles may overlap."""
         rng = np.random.default_rng(seed)
+        if not params.get("collide", 1):
+            return WindTunnel._place_uniform(n, radius, lo, hi, poly, params, rng)
         ext = hi - lo - 2 * radius
         free = float(np.prod(ext)) - abs(airfoils.signed_area(poly))
         a = math.sqrt(free / (n * 1.1))
@@ -299,6 +333,29 @@ class WindTunnel(Kind):
                 raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit around the airfoil")
         pick = np.sort(rng.choice(len(pts), size=n, replace=False))
         pos = pts[pick]
+        U = params["speed"]
+        sigma = params["thermal"] * U
+        vel = np.zeros_like(pos)
+        vel[:, 0] = U
+        if sigma > 0:
+            vel += rng.normal(0.0, sigma, vel.shape)
+        return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
+
+    @staticmethod
+    def _place_uniform(n, radius, lo, hi, poly, params, rng):
+        pts = np.empty((0, 2))
+        # a radius off the walls; from the inflow to the outflow in x, as the stream fills it
+        # (a gap there would travel down the channel as a hole in the stream)
+        a, b = lo + np.array([0.0, radius]), hi - np.array([0.0, radius])
+        box_lo, box_hi = poly.min(axis=0) - radius, poly.max(axis=0) + radius
+        while len(pts) < n:
+            p = rng.uniform(a, b, (int(1.2 * (n - len(pts))) + 16, 2))
+            near = np.all((p > box_lo) & (p < box_hi), axis=1)
+            keep = np.ones(len(p), dtype=bool)
+            if near.any():
+                keep[near] = signed_distance(poly, p[near]) > radius
+            pts = np.concatenate([pts, p[keep]])
+        pos = pts[:n]
         U = params["speed"]
         sigma = params["thermal"] * U
         vel = np.zeros_like(pos)

@@ -28,6 +28,10 @@ class Check:
     unit: str = ""
     detail: str = ""
 
+    @property
+    def difference(self) -> float:
+        return self.measured - self.reference
+
 
 # CLI name -> module of this package
 VALIDATIONS = {"dam-break": "dam_break", "hydrostatic": "hydrostatic", "wind-tunnel": "wind_tunnel"}

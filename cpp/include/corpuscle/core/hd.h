@@ -41,6 +41,7 @@ CPS_UNARY_MATH(flog, logf, std::log)
 CPS_UNARY_MATH(fexp, expf, std::exp)
 CPS_UNARY_MATH(fcos, cosf, std::cos)
 CPS_UNARY_MATH(fsin, sinf, std::sin)
+CPS_UNARY_MATH(ferf, erff, std::erf)
 #undef CPS_UNARY_MATH
 CPS_HD CPS_INLINE float fmin2(float a, float b) { return a < b ? a : b; }
 CPS_HD CPS_INLINE float fmax2(float a, float b) { return a > b ? a : b; }

@@ -197,6 +197,33 @@ struct CellGridView {
     walk<true>(i, xi, visit);
   }
 
+  // the slots in the 3^D cells around xi's cell (in the grid) of tags [tag_begin, tag_end),
+  // and how many cells that block has inside the grid: a particle's local number density
+  // is (count - 1) / (cells * cell^D) (itself not counted: unbiased for a uniform gas)
+  CPS_HD void block_count(const Vec<D>& xi, int& count, int& cells) const {
+    int c[D];
+    spec.cell_of(xi, c);
+    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+    for (int k = 0; k < D; ++k) {
+      lo[k] = c[k] > 0 ? c[k] - 1 : 0;
+      hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
+    }
+    const uint64_t dx = uint64_t(spec.dims[0]);
+    const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
+    count = 0;
+    cells = 0;
+    for (int t = tag_begin; t < tag_end; ++t) {
+      const uint64_t tbase = uint64_t(t) * spec.ncells;
+      for (int z = lo[2]; z <= hi[2]; ++z)
+        for (int y = lo[1]; y <= hi[1]; ++y)
+          for (int x = lo[0]; x <= hi[0]; ++x) {
+            const uint64_t slot = tbase + uint64_t(z) * dxy + uint64_t(y) * dx + uint64_t(x);
+            count += int(cell_end[slot] - cell_start[slot]);
+            cells += t == tag_begin ? 1 : 0;
+          }
+    }
+  }
+
   // tags in order, then the cells around xi's cell (z, y, x, each from low to high; cells
   // outside the grid skipped, so a grid narrower than three cells visits no cell twice), then
   // each cell's slots in sorted order

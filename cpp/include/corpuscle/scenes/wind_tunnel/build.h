@@ -27,6 +27,10 @@ inline Model build_model(const ParamSource& p, const ArraySource* arrays) {
     throw Error("wind-tunnel: integrator must be 0 (forward Euler) or 1 (symplectic Euler)");
   m.radius = p.f("radius");
   m.mass = p.f("mass");
+  m.collide = p.has("collide") ? int(p.integer("collide") != 0) : 1;
+  m.reflexive = p.has("reflexive") ? int(p.integer("reflexive")) : 0;
+  if (m.reflexive < 0 || m.reflexive > 2) throw Error("wind-tunnel: reflexive must be 0, 1 or 2");
+  m.recycle_scattered = p.has("recycle_scattered") ? int(p.integer("recycle_scattered") != 0) : 0;
   m.pp = SpringDashpot{p.f("k"), p.f("c")};
   m.wall = SpringDashpot{p.f("k_wall"), p.f("c_wall")};
   m.wing = SpringDashpot{p.f("k_wing"), p.f("c_wing")};
@@ -77,7 +81,7 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
 }
 
 inline const std::vector<std::string>& index_names() {
-  static const std::vector<std::string> names = {GridIndex::name};
+  static const std::vector<std::string> names = {GridIndex::name, LbvhIndex::name, AllPairsIndex::name};
   return names;
 }
 
@@ -85,7 +89,9 @@ template <class Exec>
 std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
   const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
   if (idx == GridIndex::name) return make_with<Exec, GridIndex>(std::move(ex), r);
-  throw Error("wind-tunnel: unknown index '" + idx + "' (indexes: grid)");
+  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex>(std::move(ex), r);
+  if (idx == LbvhIndex::name) return make_with<Exec, LbvhIndex>(std::move(ex), r);
+  throw Error("wind-tunnel: unknown index '" + idx + "' (indexes: grid, lbvh, allpairs)");
 }
 
 template <class Exec>

@@ -25,6 +25,13 @@ struct Model {
   int n;                 // particles
   int integrator;        // kForwardEuler / kSymplecticEuler
   float radius, mass;
+  int collide;           // particle-particle contacts on (1) or off (0: a collisionless gas)
+  int reflexive;         // 0: gather (each particle sums its own contacts: reproducible);
+                         // 1: reflexive (each pair once, the reaction added by atomics);
+                         // 2: reflexive with warp-aggregated atomics on the device
+  int recycle_scattered; // 1: a particle that touched the airfoil re-enters at the inflow when it
+                         // reaches a wall (walls send no scattered particle back: free-molecular
+                         // validation); 0: walls reflect every particle
   SpringDashpot pp;      // particle-particle
   SpringDashpot wall;    // particle-wall (top and bottom)
   SpringDashpot wing;    // particle-airfoil
@@ -77,6 +84,7 @@ struct SumsOp {
 };
 
 constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
+constexpr int kBadTraversal = 2;  // an LBVH traversal stack would have overflowed
 
 // the input of the next step
 struct Control {
@@ -104,6 +112,8 @@ struct Scene {
 struct Arrays {
   Vec2 *pos, *vel, *pos_alt, *vel_alt;
   int *id, *id_alt;
+  int *scattered, *scattered_alt;  // 1: touched the airfoil since it (re-)entered
+  float* number_density;           // particles per unit area around each (grid cell block)
   Vec2* force;       // contact force on each particle (this step)
   float* pressure;   // sum of contact-force magnitudes (the seed's "pressure")
   int* contacts;     // overlapping neighbours, walls and airfoil

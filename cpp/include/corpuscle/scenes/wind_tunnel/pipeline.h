@@ -9,6 +9,7 @@
 #pragma once
 #include <cmath>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "corpuscle/core/error.h"
@@ -19,6 +20,17 @@ namespace cps::wt {
 
 struct GridIndex {
   static constexpr const char* name = "grid";
+  static constexpr bool kGrid = true;
+};
+// every particle against every other (O(N^2)): the reference the grid is tested against
+struct AllPairsIndex {
+  static constexpr const char* name = "allpairs";
+  static constexpr bool kGrid = false;
+};
+// the seed's Karras LBVH over Morton codes (spatial/lbvh.h), gather form
+struct LbvhIndex {
+  static constexpr const char* name = "lbvh";
+  static constexpr bool kGrid = false;
 };
 
 template <class Exec, class Index>
@@ -29,9 +41,10 @@ class Pipeline {
   using ControlRecord = Control;
   static constexpr const char* kind = "wind-tunnel";
   static constexpr const char* index_name = Index::name;
-  static constexpr int kNumStages = 4;
+  static constexpr int kNumStages = 6;
   static const char* stage_name(int s) {
-    static const char* const names[] = {"sort+reorder+mark", "contacts", "reduce+finalize", "integrate"};
+    static const char* const names[] = {"keys+sort", "reorder", "build (cells / tree)", "contacts",
+                                        "reduce+finalize", "integrate"};
     return names[s];
   }
 
@@ -39,7 +52,7 @@ class Pipeline {
 
   static double bytes_needed(const Model& m) {
     const double n = m.n;
-    const double per = 2 * (2 * sizeof(Vec2) + sizeof(int)) + sizeof(Vec2) + sizeof(float) + sizeof(int) +
+    const double per = 2 * (2 * sizeof(Vec2) + 2 * sizeof(int)) + sizeof(Vec2) + 2 * sizeof(float) + sizeof(int) +
                        sizeof(StepSums) + 4 * sizeof(uint64_t) + 2 * sizeof(int);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
     return n * per + cells + sizeof(Model);
@@ -48,7 +61,7 @@ class Pipeline {
   CPS_KIND_TABLES(CPS_WT_FIELDS, CPS_WT_SCALARS, CPS_WT_CONTROLS, Scene, Control)
 
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u)
-      : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)) {
+      : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)), tree_(m.lo, m.hi, 2.0f * m.radius * (1.0f + 1e-6f)) {
     const int n = m.n;
     if (n <= 0) throw Error("wind-tunnel: no particles");
     model_.resize(1);
@@ -57,9 +70,12 @@ class Pipeline {
       pos_[p].resize(n);
       vel_[p].resize(n);
       id_[p].resize(n);
+      scat_[p].resize(n);
     }
     force_.resize(n);
+    if (std::is_same_v<Index, LbvhIndex>) tree_.resize(n);
     pressure_.resize(n);
+    ndens_.resize(n);
     contacts_.resize(n);
     items_.resize(n);
   }
@@ -98,25 +114,57 @@ class Pipeline {
     Model* md = model_.data();
     Scene* g = g_;
     // 1. key and sort the current positions, gather the arrays into cell order, mark cells
-    grid_.sort(ex_, pos_[cur].data(), nullptr, n);
-    ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
-    grid_.mark(ex_);
-    ex_.mark(0);
+    // (a collisionless gas needs no index: the arrays are copied as they are)
+    // (the all-pairs reference needs no order either)
+    constexpr bool kTree = std::is_same_v<Index, LbvhIndex>;
+    // stages timed: 0 keys and sort, 1 reorder, 2 build (cell ranges / the tree's nodes and boxes)
+    if (m_.collide && kTree) {
+      tree_.sort(ex_, pos_[cur].data(), n);
+      ex_.mark(0);
+      ex_.for_each(n, ReorderStage{tree_.order(), arrays(cur, nxt)});
+      ex_.mark(1);
+      tree_.build(ex_, pos_[nxt].data());
+    } else if (m_.collide && Index::kGrid) {
+      grid_.sort(ex_, pos_[cur].data(), nullptr, n);
+      ex_.mark(0);
+      ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
+      ex_.mark(1);
+      grid_.mark(ex_);
+    } else {
+      ex_.mark(0);
+      ex_.for_each(n, ReorderStage{nullptr, arrays(cur, nxt)});
+      ex_.mark(1);
+    }
+    ex_.mark(2);
     Arrays s = arrays(nxt, cur);
-    CellGridView<D> view = grid_.view(s.pos);
-    // 2. contacts by gather
-    ex_.for_each(n, ForceStage{md, g, u_, s, view});
-    ex_.mark(1);
+    // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest)
+    auto contacts = [&](const auto& view) {
+      using V = std::decay_t<decltype(view)>;
+      if (m_.collide && m_.reflexive) {
+        ex_.for_each(n, ZeroContactsStage{s});
+        ex_.for_each(n, PairStage<V>{md, g, s, view});
+      }
+      ex_.for_each(n, ForceStage<V>{md, g, u_, s, view, grid_.spec()});
+    };
+    if constexpr (Index::kGrid) {
+      contacts(grid_.view(s.pos));
+    } else if constexpr (kTree) {
+      contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal));
+    } else {
+      const float reach = 2.0f * m_.radius;
+      contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});
+    }
+    ex_.mark(3);
     if (integrate) {
       // 3. the reductions and the per-scene update
       ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
-      ex_.mark(2);
+      ex_.mark(4);
       // 4. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n, IntegrateStage{md, g, u_, s});
-      ex_.mark(3);
+      ex_.mark(5);
     } else {
       ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
-      ex_.mark(2);
+      ex_.mark(4);
     }
   }
 
@@ -140,10 +188,14 @@ class Pipeline {
       std::vector<int> ids(n);
       for (int i = 0; i < n; ++i) ids[i] = i;
       ex_.to_device(id_[cur].data(), ids.data(), n * sizeof(int));
+      std::vector<int> zero(n, 0);
+      ex_.to_device(scat_[cur].data(), zero.data(), n * sizeof(int));
     } else if (name == "velocity") {
       ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec2));
     } else if (name == "id") {
       ex_.to_device(id_[cur].data(), src, n * sizeof(int));
+    } else if (name == "scattered") {
+      ex_.to_device(scat_[cur].data(), src, n * sizeof(int));
     } else {
       throw Error("wind-tunnel: field '" + name + "' cannot be set");
     }
@@ -171,6 +223,9 @@ class Pipeline {
     a.vel_alt = vel_[nxt].data();
     a.id = id_[cur].data();
     a.id_alt = id_[nxt].data();
+    a.scattered = scat_[cur].data();
+    a.scattered_alt = scat_[nxt].data();
+    a.number_density = ndens_.data();
     a.force = force_.data();
     a.pressure = pressure_.data();
     a.contacts = contacts_.data();
@@ -183,9 +238,12 @@ class Pipeline {
   Scene* g_;
   const Control* u_;
   CellGrid<D, Exec> grid_;
+  Lbvh<D, Exec> tree_;
   Buf<Model> model_;
   Buf<Vec2> pos_[2], vel_[2];
   Buf<int> id_[2];
+  Buf<int> scat_[2];
+  Buf<float> ndens_;
   Buf<Vec2> force_;
   Buf<float> pressure_;
   Buf<int> contacts_;

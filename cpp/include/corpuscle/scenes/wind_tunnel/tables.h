@@ -9,7 +9,9 @@
   X(position, float, 2, "fluid", true, true, pos_[cur].data(), n)         \
   X(velocity, float, 2, "fluid", true, true, vel_[cur].data(), n)         \
   X(id, int, 1, "fluid", true, false, id_[cur].data(), n)                 \
+  X(scattered, int, 1, "fluid", true, false, scat_[cur].data(), n)       \
   X(pressure, float, 1, "fluid", false, false, pressure_.data(), n)       \
+  X(number_density, float, 1, "fluid", false, false, ndens_.data(), n)    \
   X(force, float, 2, "fluid", false, false, force_.data(), n)             \
   X(contacts, int, 1, "fluid", false, false, contacts_.data(), n)
 
