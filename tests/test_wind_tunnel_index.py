@@ -134,7 +134,9 @@ def test_bench_sweeps_particles_and_indexes(tmp_path):
     assert [(row["particles"], row["neighbors"]) for row in rows] == [(600, "grid"), (600, "lbvh"), (1200, "grid"),
                                                                        (1200, "lbvh")]
     assert all(row["steps_per_second"] > 0 for row in rows)
-    assert "neighbors" in r.stdout.splitlines()[0]
+    lines = r.stdout.splitlines()
+    assert lines[0].split()[0] == "index"  # the sweep's table names each row's index
+    assert [line.split()[0] for line in lines[1:5]] == ["grid", "lbvh", "grid", "lbvh"]
 
 
 @pytest.mark.parametrize("index,form", [("lbvh", "gather"), ("lbvh", "reflexive")])
@@ -153,3 +155,36 @@ def test_no_particle_inside_the_airfoil_or_through_a_wall_with_the_tree(index, f
         hits += int((d < s.radius).sum())
     assert hits > 0 and s.state()["bad"] == 0
     assert np.array_equal(np.sort(s.field("id")), np.arange(2500))
+
+
+@pytest.mark.parametrize("factor", [1.7, 4.0])
+def test_larger_grid_cells_find_the_same_contacts_and_forces(factor):
+    """grid.cell larger than a contact diameter: fewer cells, more candidates each; the same
+    contact set (and the float64 count), the same forces to rounding (another summation order)."""
+    a = make("grid")
+    cell = factor * 2.0 * a.radius
+    b = Simulation.from_scene(load_scene("wind-tunnel"), backend="serial", particles=3000, neighbors="grid",
+                              overrides={"inflow.speed": 1.0, "inflow.speed_ratio": 1.0, "gas.solid_fraction": 0.3,
+                                         "grid.cell": cell})
+    assert b.radius == a.radius
+    checked = 0
+    for _ in range(2):
+        a.step(40)
+        ia = np.argsort(a.field("id"))
+        b.set_particles(a.positions[ia], a.velocities[ia])
+        a.evaluate()
+        b.evaluate()
+        ia, ib = np.argsort(a.field("id")), np.argsort(b.field("id"))
+        ca, cb = a.field("contacts")[ia], b.field("contacts")[ib]
+        assert np.array_equal(ca, cb)
+        assert np.array_equal(ca, _reference_contacts(a, a.positions[ia].astype(np.float64)))
+        fa, fb = a.field("force")[ia].astype(np.float64), b.field("force")[ib].astype(np.float64)
+        assert np.abs(fa - fb).max() <= 1e-5 * np.abs(fa).max()
+        checked += int((ca > 0).sum())
+    assert checked > 200
+
+
+def test_grid_cell_key_is_checked():
+    with pytest.raises(Exception, match="grid.cell"):
+        Simulation.from_scene(load_scene("wind-tunnel"), backend="serial", particles=500,
+                              overrides={"grid.cell": -1.0})

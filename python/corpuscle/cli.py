@@ -1055,10 +1055,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "version": __version__,
                 "command": _command_line(args),
             }
-            state = sim.state() if batch is None else {}
+            state = sim.state() if batch is None and hasattr(sim, "state") else {}
             if "mean_neighbors" in state:
                 row["mean_neighbors"] = float(state["mean_neighbors"])
-            if batch is None and "n_wall" in sim.info:
+            if batch is None and "n_wall" in (getattr(sim, "info", None) or {}):
                 row["wall_particles"] = int(sim.info["n_wall"])
             if (backend == "cuda" or args.stages) and batch is None:
                 row["stages"] = {str(k): float(v) for k, v in dict(sim.stage_times(steps)).items()}

@@ -26,6 +26,8 @@ inline Model build_model(const ParamSource& p, const ArraySource* arrays) {
   if (m.integrator != kForwardEuler && m.integrator != kSymplecticEuler)
     throw Error("wind-tunnel: integrator must be 0 (forward Euler) or 1 (symplectic Euler)");
   m.radius = p.f("radius");
+  m.cell = p.has("cell") ? p.f("cell") : 0.0f;
+  if (!(m.cell >= 0.0f) || !finite(m.cell)) throw Error("wind-tunnel: cell must be finite and not negative");
   m.mass = p.f("mass");
   m.collide = p.has("collide") ? int(p.integer("collide") != 0) : 1;
   m.reflexive = p.has("reflexive") ? int(p.integer("reflexive")) : 0;

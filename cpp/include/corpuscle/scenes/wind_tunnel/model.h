@@ -38,6 +38,7 @@ struct Model {
   Vec2 lo, hi;           // the channel: inflow x = lo[0], outflow x = hi[0], walls y = lo[1], hi[1]
   float speed;           // free-stream speed U (along +x)
   float thermal;         // per-component thermal velocity spread / U (0: the seed's cold beam)
+  float cell;            // the broad-phase grid's cell edge (m), at least a contact diameter
   float dt_fraction;     // the fastest particle moves at most this fraction of the radius per step
   float dt_max;
   Vec2 quarter_chord;    // moment reference point

@@ -48,7 +48,10 @@ class Pipeline {
     return names[s];
   }
 
-  static CellGridSpec<D> grid_spec(const Model& m) { return make_cell_grid<D>(m.lo, m.hi, 2.0f * m.radius); }
+  // cells of at least one contact diameter (larger cells: fewer of them, more candidates each)
+  static CellGridSpec<D> grid_spec(const Model& m) {
+    return make_cell_grid<D>(m.lo, m.hi, std::fmax(2.0f * m.radius, m.cell));
+  }
 
   static double bytes_needed(const Model& m) {
     const double n = m.n;
@@ -147,7 +150,7 @@ class Pipeline {
       ex_.for_each(n, ForceStage<V>{md, g, u_, s, view, grid_.spec()});
     };
     if constexpr (Index::kGrid) {
-      contacts(grid_.view(s.pos));
+      contacts(grid_.view(s.pos).with_radius(2.0f * m_.radius));  // the contact reach, whatever the cell
     } else if constexpr (kTree) {
       contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal));
     } else {
