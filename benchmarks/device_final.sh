@@ -28,9 +28,9 @@ say batch of 8-balls
 timeout 120 corpuscle bench magic8ball --backend cuda --particles 1000 --batch 1 1024 4096 16384 --steps 100 --repeats 3 --no-progress | tee -a "$log"
 timeout 150 python3 benchmarks/batch_sweep.py --backend cuda --batches 4096 --particles 1000 --settle 0.5 --steps 100 \
   --repeats 3 --json "$OUT/batch_settled.json" 2>&1 | tail -3 | tee -a "$log"
-say SPH box and dam break
-timeout 120 corpuscle bench fluid-box --backend cuda --particles 131072 1048576 --neighbors grid compact --steps 200 --repeats 3 --no-progress | head -8 | tee -a "$log"
-timeout 90 corpuscle bench dam-break-dsph --backend cuda --particles 1040000 171496 --neighbors grid --steps 200 --repeats 3 --no-progress | head -4 | tee -a "$log"
 say wind tunnel
 timeout 60 corpuscle bench wind-tunnel --backend cuda --steps 200 --repeats 3 --warmup 50 --no-progress | tee -a "$log"
+for c in 0.001 0.0014 0.00184 0.0026; do
+  timeout 60 corpuscle bench wind-tunnel --backend cuda --set grid.cell=$c --steps 200 --repeats 3 --warmup 50 --no-progress | head -2 | tail -1 | sed "s/^/grid.cell=$c /" | tee -a "$log"
+done
 timeout 60 corpuscle bench wind-tunnel --backend cuda --neighbors lbvh --steps 200 --repeats 3 --warmup 50 --no-progress 2>&1 | tee -a "$log"
