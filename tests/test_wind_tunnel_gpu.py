@@ -18,8 +18,8 @@ CUDA = Simulation.cuda_available()
 pytestmark = [pytest.mark.gpu, pytest.mark.skipif(not CUDA, reason="no usable CUDA backend (build or device)")]
 
 
-def _by_id(sim, name):
-    return sim.field(name)[np.argsort(sim.field("id"))]
+def _by_id(sim, name):  # host copies (a CUDA field view is device memory)
+    return sim.field(name, copy=True)[np.argsort(sim.field("id", copy=True))]
 
 
 @pytest.mark.parametrize("index", ["grid", "lbvh", "allpairs"])

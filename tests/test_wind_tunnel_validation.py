@@ -161,7 +161,7 @@ def test_scattered_particles_are_flagged_and_leave_at_the_walls():
 
 def test_interface():
     assert VALIDATIONS["wind-tunnel"] == "wind_tunnel" and load("wind-tunnel") is vwt
-    with pytest.raises(ValueError, match="known: dam-break, hydrostatic, wind-tunnel"):
+    with pytest.raises(ValueError, match="validations: dam-break, hydrostatic, wind-tunnel"):
         load("nope")
     c = Check("x", 1.5, 1.0, 0.1, False)
     assert c.difference == 0.5

@@ -102,7 +102,8 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "measure.start": _K("float", 0.5, "", 0.0, 1.0,
                         "the steady part starts at this fraction of run.end_time", hi_open=True),
     "grid.cell": _K("float", 0.0, "m", 0.0, 1e3,
-                    "cell edge of the broad-phase grid (at least a contact diameter; 0: one contact diameter)"),
+                    "cell edge of the broad-phase grid, at least a contact diameter (0: about one cell per "
+                    "particle, sqrt(free area / N))"),
     "measure.block_time": _K("float", 0.0, "s", 0.0, 1e6,
                              "initial averaging block length; 0: the steady part / 64 (blocks double as needed)"),
 }
@@ -276,7 +277,9 @@ class WindTunnel(Kind):
             "thermal": thermal_ratio(v) / math.sqrt(2.0), "collide": int(bool(v["contact.enabled"])),
             "recycle_scattered": int(bool(v["wall.recycle_scattered"])),
             "reflexive": CONTACT_FORMS[v["contact.form"]], "dt_fraction": float(v["timestep.fraction"]),
-            "cell": float(v["grid.cell"]),
+            # about one cell per particle: at 2,097,152 particles on the H200 2,574 steps/s
+            # against 1,846 with cells of one contact diameter (most of them empty, 2026-12-01)
+            "cell": float(v["grid.cell"]) or math.sqrt(free_area / n),
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
