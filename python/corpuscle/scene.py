@@ -259,8 +259,9 @@ def _suggest(word: str, candidates: Iterable[str]) -> str | None:
 
 
 def _is_bool(v: Any) -> bool:
-    # Python's bool and NumPy's bool_ (which is not a subclass of it)
-    return isinstance(v, bool) or type(v).__name__ == "bool_"
+    # Python's bool and NumPy's bool_ (which is not a subclass of it; its type is named
+    # "bool_" in NumPy 1 and "bool" in NumPy 2)
+    return isinstance(v, bool) or (type(v).__module__ == "numpy" and type(v).__name__ in ("bool_", "bool"))
 
 
 def _is_integer(v: Any) -> bool:

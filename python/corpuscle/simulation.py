@@ -224,6 +224,8 @@ class Simulation:
         `callback(sim)` is called after every `chunk` steps; it may return True to stop.
         """
         if until is not None:
+            if not isinstance(until, numbers.Real) or isinstance(until, (bool, np.bool_)):
+                raise TypeError(f"until must be a number of seconds, got {until!r}")
             until = float(until)
             if not math.isfinite(until):
                 raise ValueError(f"until must be a finite time, got {until!r}")
@@ -383,6 +385,8 @@ class Simulation:
         a zero-copy view (NumPy on the CPU; on CUDA an array exposing ``__dlpack__`` for
         CuPy/PyTorch), valid until the next step. Particles are reordered every step; ``id``
         gives each one's persistent index."""
+        if not isinstance(name, str):
+            raise TypeError(f"field name must be a string, got {name!r}")
         return self.core.download(name) if copy else self.core.view(name)
 
     @property

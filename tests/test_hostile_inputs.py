@@ -1,0 +1,157 @@
+"""Inputs a new user reaches that used to end in a traceback, a misleading message, a silent
+no-op or silently wrong state: each case fails before its fix.
+
+The command-line cases go through the installed ``corpuscle`` console script (tests/cli_script.py)."""
+import warnings
+
+import numpy as np
+import pytest
+
+pytest.importorskip("corpuscle._core")
+
+import corpuscle
+from cli_script import assert_one_line_error, corpuscle as run_cli
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300)
+
+
+# --- the Python API ------------------------------------------------------------------------
+
+def test_numpy_bool_is_a_bool_key_value():
+    # NumPy 2 names np.bool_'s type "bool": it was rejected with "must be true or false, got false"
+    s = corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300,
+                                        overrides={"sph.scale_h": np.bool_(False)})
+    assert s.scene["sph.scale_h"] is False
+    assert s.scene["sph.scale_h"] == corpuscle.Simulation.from_scene(
+        "magic8ball", backend="serial", particles=300, overrides={"sph.scale_h": False}).scene["sph.scale_h"]
+
+
+def test_numpy_bool_is_not_a_step_count(sim):
+    with pytest.raises(TypeError, match="steps must be an integer"):
+        sim.step(np.bool_(True))
+
+
+@pytest.mark.parametrize("n", [2**63, 2**64 - 1, np.uint64(2**64 - 1)])
+def test_step_count_beyond_int64_is_one_line(sim, n):
+    # was nanobind's multi-line "incompatible function arguments" TypeError
+    with pytest.raises(ValueError, match=r"^steps must be <= 9223372036854775807, got \d+$"):
+        sim.step(n)
+
+
+@pytest.mark.parametrize("name", [3, None, b"position"])
+def test_field_name_must_be_a_string(sim, name):
+    with pytest.raises(TypeError, match=r"^field name must be a string, got "):
+        sim.field(name)
+
+
+@pytest.mark.parametrize("until", ["1", b"1", True, [1.0]])
+def test_run_until_must_be_a_number(until):
+    # run(until="1") used to run to t = 1 s
+    s = corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300)
+    with pytest.raises(TypeError, match="until must be a number of seconds"):
+        s.run(until=until)
+    assert s.steps == 0
+
+
+@pytest.mark.parametrize("what", ["positions", "velocities"])
+def test_set_particles_values_that_overflow_float32_are_refused(what):
+    # 1e300 is finite as float64 but inf as the core's float32: it was accepted (with a
+    # NumPy RuntimeWarning) and the next step started from an infinite state
+    s = corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300)
+    pos = np.array(s.positions, dtype=np.float64)
+    vel = np.zeros_like(pos)
+    (pos if what == "positions" else vel)[7] = [1e300, 0.0, 0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no overflow warning either
+        with pytest.raises(ValueError, match=rf"^{what}\[7\] = \[1e\+300, 0.0, 0.0\] does not fit in float32"):
+            s.set_particles(pos, vel)
+    # the state is unchanged and finite
+    assert np.isfinite(np.asarray(s.velocities)).all() and np.isfinite(np.asarray(s.positions)).all()
+
+
+def test_checkpoint_values_that_overflow_float32_are_refused():
+    s = corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300)
+    state = s.checkpoint()
+    state["velocity"] = np.array(state["velocity"], dtype=np.float64)
+    state["velocity"][0, 2] = -1e39
+    with pytest.raises(ValueError, match=r"checkpoint velocity\[0\] = .* does not fit in float32"):
+        s.restore(state)
+
+
+@pytest.mark.parametrize("kw", [{"acceleration": (1e300, 0, 0)}, {"acceleration": (0, -1.5e4, 0)},
+                                {"torque": (0, 0, 1e30)}])
+def test_magic8ball_control_beyond_a_shake_bound_is_refused(kw):
+    # 1e300 m/s² was taken (inf in float32) and the run went unstable at its first step
+    s = corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300)
+    name = next(iter(kw))
+    with pytest.raises(ValueError, match=rf"^{name} must be 3 numbers each in \["):
+        s.set_control(**kw)
+    assert s.control[name] == [0.0, 0.0, 0.0]
+    # the bound itself is allowed (the same range as a [[shake]] window's key)
+    s.set_control(acceleration=(1e4, 0, 0), torque=(0, 0, -1e6))
+    assert s.control == {"acceleration": [1e4, 0.0, 0.0], "torque": [0.0, 0.0, -1e6]}
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_wind_tunnel_with_a_handful_of_particles_builds_without_warnings(n):
+    # a lattice spacing wider than the channel gave no row: "divide by zero" RuntimeWarnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = corpuscle.Simulation.from_scene("wind-tunnel", backend="serial", particles=n)
+    pos = np.asarray(s.positions)
+    assert pos.shape == (n, 2) and np.isfinite(pos).all()
+    L, H = s.scene["channel.length"], s.scene["channel.height"]
+    assert (np.abs(pos[:, 0]) < L / 2).all() and (np.abs(pos[:, 1]) < H / 2).all()
+
+
+# --- the command line ----------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def checkpointed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ck") / "c.cps"
+    p = run_cli("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "20", "--every", "10",
+                "--checkpoint-every", "10", "--out", out)
+    assert p.returncode == 0, p.stderr
+    return out
+
+
+@pytest.mark.parametrize("t", ["0.0001", "0.03"])
+def test_resume_to_a_time_already_passed_is_an_error(checkpointed, t):
+    # it took no step and reported success (exit 0, "steps 0")
+    before = checkpointed.read_bytes()
+    p = run_cli("run", "--resume", checkpointed, "--backend", "serial", "--time", t)
+    assert_one_line_error(p, f"--time {float(t):g} must be after the checkpoint's time 0.03 s (step 20")
+    assert checkpointed.read_bytes() == before
+
+
+def test_resume_to_a_later_time_still_runs(checkpointed, tmp_path):
+    out = tmp_path / "more.cps"
+    p = run_cli("run", "--resume", checkpointed, "--backend", "serial", "--time", "0.0375", "--out", out)
+    assert p.returncode == 0, p.stderr
+    with corpuscle.open(out) as r:
+        assert r[-1].time == pytest.approx(0.0375, abs=1e-6)
+
+
+@pytest.mark.parametrize("cmd", [["run", "--resume"], ["view"]])
+def test_a_folder_is_named_a_folder_not_missing(tmp_path, cmd):
+    d = tmp_path / "run.cps"
+    d.mkdir()
+    p = run_cli(*cmd, d)
+    assert_one_line_error(p, f"{d}: is a folder")
+
+
+@pytest.mark.parametrize("empty", ["", " "])
+def test_empty_out_is_an_error_not_the_default_name(tmp_path, empty):
+    # --out '' wrote magic8ball.cps in the current folder
+    p = run_cli("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "1", "--out", empty,
+                cwd=tmp_path)
+    assert_one_line_error(p, f"--out must name a file, got {empty!r}")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_empty_out_on_resume_is_an_error(checkpointed):
+    p = run_cli("run", "--resume", checkpointed, "--backend", "serial", "--steps", "1", "--out", "")
+    assert_one_line_error(p, "--out must name a file, got ''")
