@@ -279,7 +279,9 @@ class WindTunnel(Kind):
             raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
                              f"(lattice spacing {a:.3g} m < a diameter)")
         while True:
-            nx, ny = int(ext[0] / a), int(ext[1] / a)
+            # at least one site each way: a spacing wider than the channel (a handful of
+            # particles) would leave no row and divide by zero
+            nx, ny = max(1, int(ext[0] / a)), max(1, int(ext[1] / a))
             xs = lo[0] + radius + (np.arange(nx) + 0.5) * (ext[0] / nx)
             ys = lo[1] + radius + (np.arange(ny) + 0.5) * (ext[1] / ny)
             X, Y = np.meshgrid(xs, ys, indexing="ij")
