@@ -429,6 +429,15 @@ def _same_file(a: pathlib.Path, b: pathlib.Path) -> bool:
         return False
 
 
+def _out_path(text: str | None, default: pathlib.Path) -> pathlib.Path:
+    """``--out`` as given (an empty one is an error, not the default), or the default."""
+    if text is None:
+        return default
+    if not text.strip():
+        raise UsageError(f"--out must name a file, got {text!r}")
+    return pathlib.Path(text)
+
+
 def _check_out(out: pathlib.Path, scene) -> None:
     """The output folder must exist, and the output must not be a folder or the scene file."""
     parent = out.parent if str(out.parent) else pathlib.Path(".")
@@ -458,7 +467,7 @@ def _run_prepare(args: argparse.Namespace) -> _RunPlan:
         raise UsageError("run needs a SCENE or FILE.toml (or --resume RUN.cps); see `corpuscle run --help`")
     scene = _load_with_options(args, RUN_OPTIONS)
     every = int(scene["run.record_every"])
-    out = pathlib.Path(args.out) if args.out else pathlib.Path(f"{_safe_filename(scene.name)}.cps")
+    out = _out_path(args.out, pathlib.Path(f"{_safe_filename(scene.name)}.cps"))
     _check_out(out, scene)
     if ckpt is not None and ckpt % every:
         raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval "
@@ -481,7 +490,7 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
     io = importlib.import_module("corpuscle.io")
     src = pathlib.Path(args.resume)
     if not src.is_file():
-        raise UsageError(f"--resume {src}: no such file")
+        raise UsageError(f"--resume {src}: {'is a folder' if src.is_dir() else 'no such file'}")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a torn tail is what a killed run leaves: it is cut off
         run = io.open(src)
@@ -493,7 +502,7 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
             raise UsageError(f"--resume {src}: the run has no checkpoint (record with --checkpoint-every K)")
         frame = run[last]
         state = {name: np.array(frame[name]) for name in frame.fields}
-        step0 = int(frame.step)
+        step0, time0 = int(frame.step), float(frame.time)
     finally:
         run.close()
     params = header.get("parameters")
@@ -504,12 +513,16 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
     # the frames go on holding what the recorded ones hold
     args.velocity = bool(args.velocity or header.get("velocity_recorded"))
     args.ghosts = bool(args.ghosts or header.get("ghosts_recorded"))
-    out = pathlib.Path(args.out) if args.out else src
+    out = _out_path(args.out, src)
     _check_out(out, None)
     if ckpt is None:
         ckpt = header.get("checkpoint_every")
     if ckpt is not None and int(ckpt) % every:
         raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval ({every})")
+    if args.time is not None and not args.time > time0:
+        # an end already passed would take no step and still report success
+        raise UsageError(f"--time {args.time:g} must be after the checkpoint's time {time0:g} s "
+                         f"(step {step0} of {src})")
     # a new end, or the recorded run's own
     if steps is not None or args.time is not None:
         end_time = args.time if args.time is not None else math.inf
@@ -913,7 +926,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     _live_options(args, needs_live=False)
     path = pathlib.Path(args.run)
     if not path.is_file():
-        raise UsageError(f"{path}: no such file")
+        raise UsageError(f"{path}: {'is a folder' if path.is_dir() else 'no such file'}")
     live = importlib.import_module("corpuscle.live")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a torn tail: its whole frames are shown
