@@ -155,3 +155,12 @@ def test_empty_out_is_an_error_not_the_default_name(tmp_path, empty):
 def test_empty_out_on_resume_is_an_error(checkpointed):
     p = run_cli("run", "--resume", checkpointed, "--backend", "serial", "--steps", "1", "--out", "")
     assert_one_line_error(p, "--out must name a file, got ''")
+
+
+@pytest.mark.parametrize("bad, words", [("", "--json must name a file, got ''"), (".", "--json .: is a folder")])
+def test_bench_json_target_is_checked_before_the_benchmark(tmp_path, bad, words):
+    # --json '' measured and wrote nothing; --json FOLDER measured, then failed to write
+    p = run_cli("bench", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "1", "--repeats", "1",
+                "--json", bad, cwd=tmp_path)
+    assert_one_line_error(p, words)
+    assert list(tmp_path.iterdir()) == []

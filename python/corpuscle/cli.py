@@ -979,10 +979,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     args.device = _int_option("--device", args.device, minimum=0)
     args.particles = _int_option("--particles", args.particles)
     scene = _load_with_options(args, {})
-    if args.json:
+    if args.json is not None:
+        # checked before the benchmark runs, not after it has taken minutes
+        if not args.json.strip():
+            raise UsageError(f"--json must name a file, got {args.json!r}")
         parent = pathlib.Path(args.json).parent
         if not parent.is_dir():
             raise UsageError(f"--json {args.json}: folder {parent} does not exist")
+        if pathlib.Path(args.json).is_dir():
+            raise UsageError(f"--json {args.json}: is a folder")
     simulation = _import_core_module("corpuscle.simulation")
     Simulation = simulation.Simulation
     backends = list(dict.fromkeys(args.backend)) if args.backend else [
