@@ -164,3 +164,22 @@ def test_bench_json_target_is_checked_before_the_benchmark(tmp_path, bad, words)
                 "--json", bad, cwd=tmp_path)
     assert_one_line_error(p, words)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("sets, words", [
+    (["--set", "gas.radius=1"], "gas.radius = 1 m does not fit in the channel: channel.height = 2 m"),
+    (["--particles", "1", "--set", "gas.solid_fraction=0.5"],
+     "gas.radius = 1.06 m (from gas.solid_fraction = 0.5 and gas.particles = 1) does not fit in the channel"),
+])
+def test_wind_tunnel_particle_wider_than_the_channel_names_the_keys(tmp_path, sets, words):
+    # was the core's "wind-tunnel: the channel must be wider than a particle", naming no key
+    p = run_cli("run", "wind-tunnel", "--backend", "serial", "--steps", "1", *sets, "--out", tmp_path / "w.cps")
+    assert_one_line_error(p, words)
+
+
+def test_a_toml_date_is_shown_as_toml_writes_it(tmp_path):
+    # the message showed Python's repr: "got datetime.date(1970, 1, 1)"
+    f = tmp_path / "d.toml"
+    f.write_text('[scene]\nkind = "magic8ball"\n[run]\nend_time = 1970-01-01\n', encoding="utf-8")
+    p = run_cli("run", f, "--backend", "serial", "--out", tmp_path / "d.cps")
+    assert_one_line_error(p, "run.end_time must be a number in (0, 1e6] s, got 1970-01-01")

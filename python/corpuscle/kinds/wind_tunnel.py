@@ -226,6 +226,12 @@ class WindTunnel(Kind):
         poly = airfoil_polygon(v)
         free_area = L * H - abs(airfoils.signed_area(poly))
         radius = float(v["gas.radius"]) or math.sqrt(float(v["gas.solid_fraction"]) * free_area / (math.pi * n))
+        if not H > 2 * radius:
+            given = (f"gas.radius = {radius:g} m" if v["gas.radius"] else
+                     f"gas.radius = {radius:.3g} m (from gas.solid_fraction = {v['gas.solid_fraction']:g} "
+                     f"and gas.particles = {n})")
+            raise SceneError(f"{given} does not fit in the channel: channel.height = {H:g} m must be more than "
+                             f"a diameter")
         m = float(v["gas.mass"])
         laws = {}
         for key, m_eff in (("contact", m / 2), ("wall", m), ("wing", m)):
