@@ -22,6 +22,7 @@ A new kind is a module in ``corpuscle/kinds/`` (which registers its schema here 
 from __future__ import annotations
 
 import copy
+import datetime
 import difflib
 import json
 import math
@@ -239,6 +240,8 @@ def _fmt_value(v: Any) -> str:
         return "[" + ", ".join(_fmt_value(x) for x in v) + "]"
     if isinstance(v, Mapping):
         return "{" + ", ".join(f"{k} = {_fmt_value(x)}" for k, x in v.items()) + "}"
+    if isinstance(v, (datetime.date, datetime.time)):  # TOML dates and times, as TOML writes them
+        return v.isoformat()
     return repr(v)
 
 
