@@ -183,3 +183,28 @@ def test_a_toml_date_is_shown_as_toml_writes_it(tmp_path):
     f.write_text('[scene]\nkind = "magic8ball"\n[run]\nend_time = 1970-01-01\n', encoding="utf-8")
     p = run_cli("run", f, "--backend", "serial", "--out", tmp_path / "d.cps")
     assert_one_line_error(p, "run.end_time must be a number in (0, 1e6] s, got 1970-01-01")
+
+
+def test_ctrl_c_during_a_long_initialisation_exits_at_once(tmp_path):
+    # 2,000,000 particles are placed and built in one call into the core (a minute on 2
+    # cores); Ctrl-C then waited for all of it
+    import signal
+    import subprocess
+    import time
+    from cli_script import script
+    out = tmp_path / "big.cps"
+    proc = subprocess.Popen([script(), "run", "magic8ball", "--backend", "serial", "--particles", "2000000",
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)  # past the imports, inside the placement (3 s on 16 cores)
+    t = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    try:
+        stdout, stderr = proc.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        pytest.fail("Ctrl-C during initialisation was not taken within 20 s")
+    assert time.monotonic() - t < 1.5
+    assert proc.returncode == 130, stderr
+    assert stderr == "corpuscle: interrupted while initialising (nothing written)\n"
+    assert stdout == "" and not out.exists()
