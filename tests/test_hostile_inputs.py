@@ -10,6 +10,7 @@ import pytest
 pytest.importorskip("corpuscle._core")
 
 import corpuscle
+from corpuscle.scene import SceneError
 from cli_script import assert_one_line_error, corpuscle as run_cli
 
 
@@ -208,3 +209,20 @@ def test_ctrl_c_during_a_long_initialisation_exits_at_once(tmp_path):
     assert proc.returncode == 130, stderr
     assert stderr == "corpuscle: interrupted while initialising (nothing written)\n"
     assert stdout == "" and not out.exists()
+
+
+def test_a_binary_file_as_airfoil_is_named_binary(tmp_path):
+    # random bytes were echoed back: a line of binary garbage (control characters included)
+    f = tmp_path / "r.dat"
+    f.write_bytes(bytes(range(256)) * 8)
+    p = run_cli("run", "wind-tunnel", "--backend", "serial", "--particles", "300", "--steps", "1",
+                "--set", f"airfoil.shape={f}", "--out", tmp_path / "w.cps")
+    assert_one_line_error(p, f"airfoil.shape: {f}: not a text airfoil file (it holds binary data)")
+
+
+def test_a_long_bad_airfoil_line_is_shortened(tmp_path):
+    f = tmp_path / "long.dat"
+    f.write_text("title\n" + "x" * 5000 + "\n", encoding="utf-8")
+    with pytest.raises(SceneError, match=r"long.dat:2: expected two numbers 'x y', got 'x{57}\.\.\.'$"):
+        corpuscle.Simulation.from_scene("wind-tunnel", backend="serial", particles=300,
+                                        overrides={"airfoil.shape": str(f)})
