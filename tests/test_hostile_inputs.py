@@ -226,3 +226,26 @@ def test_a_long_bad_airfoil_line_is_shortened(tmp_path):
     with pytest.raises(SceneError, match=r"long.dat:2: expected two numbers 'x y', got 'x{57}\.\.\.'$"):
         corpuscle.Simulation.from_scene("wind-tunnel", backend="serial", particles=300,
                                         overrides={"airfoil.shape": str(f)})
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: corpuscle.Simulation.from_scene(None), "scene must be a built-in scene name, a TOML file path or a Scene"),
+    (lambda: corpuscle.Simulation.from_scene(3), "scene must be a built-in scene name, a TOML file path or a Scene"),
+    (lambda: corpuscle.Simulation.from_scene("magic8ball", backend="serial", overrides=[("fluid.xsph", 0.2)]),
+     "overrides must be a mapping of dotted keys to values"),
+])
+def test_from_scene_wrong_types_name_the_argument(call, words):
+    # were "expected str, bytes or os.PathLike object, not NoneType" and "cannot convert
+    # dictionary update sequence element #0 to a sequence"
+    with pytest.raises(TypeError, match=words):
+        call()
+
+
+def test_restore_and_checkpoint_argument_must_be_a_checkpoint(sim):
+    # were "argument of type 'NoneType' is not iterable"
+    for bad in (None, 3, "state"):
+        with pytest.raises(TypeError, match="checkpoint must be the dict Simulation.checkpoint"):
+            sim.restore(bad)
+        if bad is not None:  # None: no checkpoint, a fresh start
+            with pytest.raises(TypeError, match="checkpoint must be the dict Simulation.checkpoint"):
+                corpuscle.Simulation(sim.scene, backend="serial", checkpoint=bad)

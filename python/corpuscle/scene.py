@@ -717,6 +717,8 @@ def load_scene(name_or_path: str | os.PathLike, overrides: Mapping[str, Any] | N
     dotted-key ``overrides`` (validated the same way). Raises :class:`SceneError`."""
     # a path-like object is always a file; a bare name is a built-in first
     is_path = isinstance(name_or_path, os.PathLike)
+    if not is_path and not isinstance(name_or_path, str):
+        raise TypeError(f"scene must be a built-in scene name, a TOML file path or a Scene, got {name_or_path!r}")
     text = os.fspath(name_or_path)
     if not is_path and not _looks_like_path(text):
         names = _builtin_names()
