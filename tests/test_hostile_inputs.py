@@ -249,3 +249,16 @@ def test_restore_and_checkpoint_argument_must_be_a_checkpoint(sim):
         if bad is not None:  # None: no checkpoint, a fresh start
             with pytest.raises(TypeError, match="checkpoint must be the dict Simulation.checkpoint"):
                 corpuscle.Simulation(sim.scene, backend="serial", checkpoint=bad)
+
+
+def test_render_onto_the_frame_stream_is_refused(tmp_path, checkpointed):
+    # --out same.gif --render same.gif wrote the run, then the GIF over it (exit 0: the run lost)
+    same = tmp_path / "same.gif"
+    p = run_cli("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "2",
+                "--out", same, "--render", same)
+    assert_one_line_error(p, f"--render {same}: is the --out file {same}")
+    assert not same.exists()
+    before = checkpointed.read_bytes()
+    p = run_cli("run", "--resume", checkpointed, "--backend", "serial", "--steps", "1", "--render", checkpointed)
+    assert_one_line_error(p, f"--render {checkpointed}: is the --out file")
+    assert checkpointed.read_bytes() == before

@@ -449,6 +449,13 @@ def _check_out(out: pathlib.Path, scene) -> None:
         raise UsageError(f"--out {out}: is the scene file being run; choose another output")
 
 
+def _check_render(args: argparse.Namespace, out: pathlib.Path) -> None:
+    """``--render`` must not name the frame stream: the picture would replace the run."""
+    render = getattr(args, "render", None)
+    if render and _same_file(pathlib.Path(render), out):
+        raise UsageError(f"--render {render}: is the --out file {out}; choose another")
+
+
 def _run_prepare(args: argparse.Namespace) -> _RunPlan:
     """Parse options and load the scene: everything that can fail without the core."""
     steps = _int_option("--steps", args.steps, minimum=1)
@@ -469,6 +476,7 @@ def _run_prepare(args: argparse.Namespace) -> _RunPlan:
     every = int(scene["run.record_every"])
     out = _out_path(args.out, pathlib.Path(f"{_safe_filename(scene.name)}.cps"))
     _check_out(out, scene)
+    _check_render(args, out)
     if ckpt is not None and ckpt % every:
         raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval "
                          f"(run.record_every = {every})")
@@ -515,6 +523,7 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
     args.ghosts = bool(args.ghosts or header.get("ghosts_recorded"))
     out = _out_path(args.out, src)
     _check_out(out, None)
+    _check_render(args, out)
     if ckpt is None:
         ckpt = header.get("checkpoint_every")
     if ckpt is not None and int(ckpt) % every:
