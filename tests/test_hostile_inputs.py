@@ -262,3 +262,32 @@ def test_render_onto_the_frame_stream_is_refused(tmp_path, checkpointed):
     p = run_cli("run", "--resume", checkpointed, "--backend", "serial", "--steps", "1", "--render", checkpointed)
     assert_one_line_error(p, f"--render {checkpointed}: is the --out file")
     assert checkpointed.read_bytes() == before
+
+
+def _write_section(path, thickness):
+    # a symmetric section, Selig order (upper surface from the trailing edge, then the lower)
+    x = np.linspace(1.0, 0.0, 21)
+    y = thickness * np.sqrt(np.clip(x * (1 - x), 0, None))
+    pts = [(a, b) for a, b in zip(x, y)] + [(a, -b) for a, b in zip(x[::-1][1:], y[::-1][1:])]
+    path.write_text("section\n" + "".join(f"{a:.6f} {b:.6f}\n" for a, b in pts), encoding="utf-8")
+
+
+def test_an_airfoil_file_beside_the_scene_file_is_found_from_any_folder(tmp_path, monkeypatch):
+    # shape = "wing.dat" in scenes/wing.toml was looked up in the current folder: run from
+    # the project folder it was an "unknown airfoil 'wing.dat'"
+    folder = tmp_path / "scenes"
+    folder.mkdir()
+    _write_section(folder / "wing.dat", 0.2)
+    (folder / "wing.toml").write_text('[scene]\nkind = "wind-tunnel"\n[airfoil]\nshape = "wing.dat"\n', encoding="utf-8")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    s = corpuscle.scene.load_scene(str(folder / "wing.toml"))
+    assert s["airfoil.shape"] == str(folder / "wing.dat")
+    # an override is taken from the current folder, before the scene's
+    _write_section(elsewhere / "wing.dat", 0.1)
+    assert s.with_overrides({"airfoil.shape": "wing.dat"})["airfoil.shape"] == str(elsewhere / "wing.dat")
+    # names that are not files stay what they were
+    assert s.with_overrides({"airfoil.shape": "naca2412"})["airfoil.shape"] == "naca2412"
+    sim = corpuscle.Simulation.from_scene(s, backend="serial", particles=50)
+    assert sim.n_particles == 50

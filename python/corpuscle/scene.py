@@ -101,6 +101,9 @@ class KeySpec:
     dim: int | None = None
     min_length: int | None = None
     max_length: int | None = None
+    #: ``str`` keys that may name a file (``airfoil.shape``): a relative value naming a file in
+    #: the scene file's folder is that file (made absolute), as a ``path`` key's would be
+    file_beside_scene: bool = False
 
     def __post_init__(self) -> None:
         # a schema typo should fail at import, not at the first bad scene
@@ -365,6 +368,10 @@ def check_value(key: str, spec: KeySpec, value: Any, base: str | os.PathLike | N
             hint = _suggest(value, spec.choices)
             extra = f" (did you mean {json.dumps(hint)}?)" if hint else ""
             raise SceneError(f"{key} must be {spec.describe()}, got {_fmt_value(value)}{extra}")
+        if spec.file_beside_scene and base is not None and value.strip():
+            beside = pathlib.Path(base) / os.path.expanduser(value.strip())
+            if beside.is_file():
+                return str(pathlib.Path(os.path.abspath(beside)))
         return value
     # vectors: exactly 2 or 3 finite numbers, each within the bounds
     if t in _VECTORS:
@@ -533,6 +540,8 @@ def _override_path(spec: KeySpec | None, value: Any) -> Any:
         expanded = os.path.expanduser(value)
         if not os.path.isabs(expanded):
             return os.path.abspath(expanded)
+    if spec is not None and spec.file_beside_scene and isinstance(value, str) and os.path.isfile(value.strip()):
+        return os.path.abspath(os.path.expanduser(value.strip()))
     return value
 
 

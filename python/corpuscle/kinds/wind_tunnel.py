@@ -73,7 +73,8 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
                          "thermal speed sqrt(2 kT / m) over U (1 / the speed ratio); 0: the seed's cold beam"),
     # the airfoil
     "airfoil.shape": _K("str", "e398", "", doc="'e398' (shipped), a NACA 4-digit code ('naca2412'), "
-                        "'flat-plate', or the path of a Selig/Lednicer .dat file"),
+                        "'flat-plate', or the path of a Selig/Lednicer .dat file (relative: to the scene "
+                        "file's folder)", file_beside_scene=True),
     "airfoil.chord": _K("float", 0.5, "m", 0.0, 1e3, "chord length", lo_open=True),
     "airfoil.angle_of_attack": _K("float", 10.0, "deg", -90.0, 90.0, "angle of attack, nose up positive"),
     "airfoil.leading_edge": _K("vec2", [-1.2, 0.0], "m", -1e4, 1e4, "leading-edge position"),
