@@ -291,3 +291,23 @@ def test_an_airfoil_file_beside_the_scene_file_is_found_from_any_folder(tmp_path
     assert s.with_overrides({"airfoil.shape": "naca2412"})["airfoil.shape"] == "naca2412"
     sim = corpuscle.Simulation.from_scene(s, backend="serial", particles=50)
     assert sim.n_particles == 50
+
+
+def test_ctrl_c_during_bench_initialisation_exits_at_once():
+    import signal
+    import subprocess
+    import time
+    from cli_script import script
+    proc = subprocess.Popen([script(), "bench", "magic8ball", "--backend", "serial", "--particles", "2000000",
+                             "--steps", "1", "--repeats", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)
+    t = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    try:
+        _, stderr = proc.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        pytest.fail("Ctrl-C during bench initialisation was not taken within 20 s")
+    assert time.monotonic() - t < 1.5
+    assert proc.returncode == 130 and stderr == "corpuscle: interrupted while initialising serial\n", stderr

@@ -1067,7 +1067,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             if bar is not None:
                 bar.set_description(backend)
             t_init = time.perf_counter()
-            sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
+            with _interruptible_init(f"initialising {backend}"):
+                sim = Simulation.from_scene(scene, backend=backend, neighbors=args.neighbors, device=args.device)
             init_seconds = time.perf_counter() - t_init
             if warmup:
                 sim.step(warmup)
