@@ -311,3 +311,11 @@ def test_ctrl_c_during_bench_initialisation_exits_at_once():
         pytest.fail("Ctrl-C during bench initialisation was not taken within 20 s")
     assert time.monotonic() - t < 1.5
     assert proc.returncode == 130 and stderr == "corpuscle: interrupted while initialising serial\n", stderr
+
+
+def test_out_dev_null_runs_and_exits_0():
+    # the frames went to /dev/null, then fsync on the device failed: "cannot write /dev/null:
+    # Invalid argument", exit 4, after a summary saying it succeeded
+    p = run_cli("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "3", "--out", "/dev/null")
+    assert p.returncode == 0, p.stderr
+    assert p.stderr == "" and "/dev/null (2 frames)" in p.stdout

@@ -439,7 +439,9 @@ class FrameWriter:
         if self._file is None or self._file.closed:
             return
         try:
-            os.fsync(self._file.fileno())
+            # a device or a pipe (--out /dev/null) has nothing to sync, and fsync fails on it
+            if stat.S_ISREG(os.fstat(self._file.fileno()).st_mode):
+                os.fsync(self._file.fileno())
         finally:
             self._file.close()
 
