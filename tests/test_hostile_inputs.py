@@ -319,3 +319,16 @@ def test_out_dev_null_runs_and_exits_0():
     p = run_cli("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "3", "--out", "/dev/null")
     assert p.returncode == 0, p.stderr
     assert p.stderr == "" and "/dev/null (2 frames)" in p.stdout
+
+
+def test_wind_tunnel_speed_scale_within_the_inflow_speed_range():
+    # speed_scale=1e30 was taken: the stream at 5e28 m/s, dt near zero, run(until=...) stood still
+    s = corpuscle.Simulation.from_scene("wind-tunnel", backend="serial", particles=50)
+    U = s.scene["inflow.speed"]
+    with pytest.raises(ValueError, match=r"^speed_scale = 1e\+30 makes the stream .* above inflow.speed's bound 10000"):
+        s.set_control(speed_scale=1e30)
+    assert s.control["speed_scale"] == [0.0]
+    top = 10000.0 / U - 1.0
+    s.set_control(speed_scale=top * (1 - 1e-9))  # up to the bound is allowed
+    with pytest.raises(ValueError, match="above inflow.speed's bound"):
+        s.set_control(speed_scale=top * 1.001)

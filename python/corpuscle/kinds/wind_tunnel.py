@@ -385,6 +385,12 @@ class WindTunnel(Kind):
         x, p = values["speed_scale"], values["pitch"]
         if not math.isfinite(x) or x <= -1.0:
             raise ValueError(f"speed_scale must be finite and > -1, got {speed_scale!r}")
+        # the stream within inflow.speed's own range: faster, dt (a fraction of a radius per
+        # step at the fastest particle) shrinks until the run stands still in simulated time
+        top, U = float(WIND_TUNNEL_KEYS["inflow.speed"].hi), float(sim.info["speed"])
+        if U * (1.0 + x) > top:
+            raise ValueError(f"speed_scale = {x:g} makes the stream U (1 + speed_scale) = {U * (1.0 + x):.4g} m/s, "
+                             f"above inflow.speed's bound {top:g} m/s")
         if not math.isfinite(p) or abs(p) > MAX_PITCH:
             raise ValueError(f"pitch must be finite degrees in [-{MAX_PITCH:g}, {MAX_PITCH:g}], got {pitch!r}")
         return {"speed_scale": [x], "pitch": [p]}
