@@ -332,3 +332,16 @@ def test_wind_tunnel_speed_scale_within_the_inflow_speed_range():
     s.set_control(speed_scale=top * (1 - 1e-9))  # up to the bound is allowed
     with pytest.raises(ValueError, match="above inflow.speed's bound"):
         s.set_control(speed_scale=top * 1.001)
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["--time", "1e7"], "corpuscle: error: --time 1e+07: run.end_time must be a number in (0, 1e6] s, got 10000000.0"),
+    (["--seed", "-3"], "corpuscle: error: --seed -3: run.seed must be an integer in [0, "),
+    (["--every", "10000000000"], "corpuscle: error: --every 10000000000: run.record_every must be an integer in "),
+    (["--set", "run.end_time=-3"], "corpuscle: error: run.end_time must be a number in (0, 1e6] s, got -3"),
+])
+def test_an_out_of_range_option_is_named_as_typed(argv, line, tmp_path):
+    # --time 1e7 said only "run.end_time must be ...", a key the user never typed
+    p = run_cli("run", "magic8ball", "--backend", "serial", *argv, "--out", tmp_path / "m.cps")
+    assert_one_line_error(p)
+    assert p.stderr.startswith(line), p.stderr

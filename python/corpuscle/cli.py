@@ -135,7 +135,21 @@ def _load_with_options(args: argparse.Namespace, options: dict[str, str]):
         if key is None:
             raise UsageError(f"--particles: scene kind {scene.kind!r} has no particle count (use --set)")
         ovr[key] = args.particles
-    return scene.with_overrides(ovr)
+    try:
+        return scene.with_overrides(ovr)
+    except SceneError as exc:
+        raise _named_by_option(exc, args, options) from None
+
+
+def _named_by_option(exc: SceneError, args: argparse.Namespace, options: dict[str, str]) -> SceneError:
+    """A scene error about a key that a dedicated option set (``--time`` sets
+    ``run.end_time``) says which option it was: the user never typed the key."""
+    given = {key: f"--{attr}" for attr, key in options.items() if getattr(args, attr, None) is not None}
+    for key, option in given.items():
+        if str(exc).startswith(f"{key} "):
+            value = getattr(args, option[2:])
+            return SceneError(f"{option} {value:g}: {exc}" if isinstance(value, float) else f"{option} {value}: {exc}")
+    return exc
 
 
 def _particles_help() -> str:
