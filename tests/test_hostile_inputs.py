@@ -345,3 +345,9 @@ def test_an_out_of_range_option_is_named_as_typed(argv, line, tmp_path):
     p = run_cli("run", "magic8ball", "--backend", "serial", *argv, "--out", tmp_path / "m.cps")
     assert_one_line_error(p)
     assert p.stderr.startswith(line), p.stderr
+
+
+def test_set_of_one_array_entry_says_how_arrays_are_set(tmp_path):
+    # --set shake.0.start=1 was told it "expects a dotted key", and it is one
+    p = run_cli("run", "magic8ball", "--set", "shake.0.start=1", "--out", tmp_path / "m.cps")
+    assert_one_line_error(p, "--set shake.0.start: [[shake]] entries are set all at once, as --set 'shake=[{...}, ...]'")

@@ -770,7 +770,13 @@ def parse_set(expr: str) -> tuple[str, object]:
     key, _, raw = expr.partition("=")
     key, raw = key.strip(), raw.strip()
     if not _KEY_RE.match(key):
-        raise SceneError(f"--set expects a dotted key before '=', got {_fmt_value(key)} in {_fmt_value(expr)}")
+        head = key.split(".", 1)[0]
+        if "." in key and any(head in k.arrays for k in KINDS.values()):
+            # shake.0.start: one window of an array of tables cannot be set on its own
+            raise SceneError(f"--set {key}: [[{head}]] entries are set all at once, as "
+                             f"--set '{head}=[{{...}}, ...]' (see `corpuscle scenes --keys`)")
+        raise SceneError(f"--set expects a dotted key (names joined by dots, each starting with a letter) before '=', "
+                         f"got {_fmt_value(key)} in {_fmt_value(expr)}")
     if not raw:
         raise SceneError(f"--set {key}= has no value")
     try:
