@@ -351,3 +351,28 @@ def test_set_of_one_array_entry_says_how_arrays_are_set(tmp_path):
     # --set shake.0.start=1 was told it "expects a dotted key", and it is one
     p = run_cli("run", "magic8ball", "--set", "shake.0.start=1", "--out", tmp_path / "m.cps")
     assert_one_line_error(p, "--set shake.0.start: [[shake]] entries are set all at once, as --set 'shake=[{...}, ...]'")
+
+
+def test_vtkhdf_export_on_a_full_disk_is_one_line_and_leaves_nothing(tmp_path):
+    # HDF5's own writes failed inside h5py's close: a traceback per open object, then a
+    # segmentation fault (exit 139) and the hidden partial file left in the folder
+    pytest.importorskip("h5py")
+    import resource
+    import signal
+    import subprocess
+    from cli_script import script
+    run = tmp_path / "r.cps"
+    p = run_cli("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "60", "--every", "2",
+                "--out", run)
+    assert p.returncode == 0, p.stderr
+    out = tmp_path / "ex"
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))
+
+    p = subprocess.run([script(), "export", str(run), "--format", "vtkhdf", str(out)], capture_output=True, text=True,
+                       timeout=120, preexec_fn=limit)
+    assert p.returncode == 2, p.stderr[-2000:]
+    assert p.stderr == f"corpuscle: error: cannot write into {out}: File too large\n", p.stderr[-2000:]
+    assert not out.exists()
