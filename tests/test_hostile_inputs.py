@@ -394,3 +394,23 @@ def test_ctrl_c_while_the_command_line_starts_is_one_line():
     assert "Traceback" not in stderr, stderr
     assert proc.returncode in (130, -signal.SIGINT), stderr  # -2: before Python installed its handler
     assert stderr in ("", "corpuscle: interrupted\n"), stderr
+
+
+def test_a_disk_full_before_the_first_frame_is_exit_4_and_leaves_no_empty_file(tmp_path):
+    # the header did not fit: "cannot write ...", exit 2 as if the input were bad, and an
+    # empty (unreadable) file left behind
+    import resource
+    import signal
+    import subprocess
+    from cli_script import script
+    out = tmp_path / "r.cps"
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1000, 1000))  # less than the header
+
+    p = subprocess.run([script(), "run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "2",
+                        "--out", str(out)], capture_output=True, text=True, timeout=120, preexec_fn=limit)
+    assert p.returncode == 4, p.stderr
+    assert p.stderr == f"corpuscle: error: cannot write {out}: File too large\n"
+    assert not out.exists()

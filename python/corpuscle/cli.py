@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import datetime as _dt
+import errno
 import importlib
 import importlib.util
 import json
@@ -758,7 +759,14 @@ def _open_writer(io, plan: _RunPlan, header: dict[str, Any]):
                           resumed_at_step=plan.resume["step"], command=header["command"])
         return io.FrameWriter(out, header)
     except OSError as exc:
-        raise UsageError(f"cannot write {out}: {exc.strerror or _one_line(exc)}") from None
+        error = UsageError(f"cannot write {out}: {exc.strerror or _one_line(exc)}")
+        if exc.errno in _DISK_FULL:
+            error.exit_code = EXIT_WRITE  # the disk, not the input: as when it fills up mid-run
+        raise error from None
+
+
+# errors of a disk that is full (or a file size limit), not of the input
+_DISK_FULL = {getattr(errno, name) for name in ("ENOSPC", "EFBIG", "EDQUOT") if hasattr(errno, name)}
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -1232,7 +1240,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not isinstance(exc, _user_errors()) or os.environ.get("CORPUSCLE_DEBUG"):
             raise
         _err(f"error: {_one_line(exc)}")
-        return EXIT_USAGE
+        return int(getattr(exc, "exit_code", EXIT_USAGE))
 
 
 if __name__ == "__main__":
