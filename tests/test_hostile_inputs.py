@@ -378,23 +378,28 @@ def test_vtkhdf_export_on_a_full_disk_is_one_line_and_leaves_nothing(tmp_path):
     assert not out.exists()
 
 
-def test_ctrl_c_while_the_command_line_starts_is_one_line():
+def test_ctrl_c_while_the_command_line_starts_is_one_line(monkeypatch, capsys):
     # Ctrl-C during the imports (a second or more on a loaded machine) was a traceback out
-    # of the generated console script, exit -2
-    import signal
-    import subprocess
-    import time
-    from cli_script import script
-    proc = subprocess.Popen([script(), "scenes"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(0.05)  # inside Python's start or the imports
-    proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=30)
-    if proc.returncode == 0:
-        pytest.skip("the command finished before the signal arrived")
-    assert "Traceback" not in stderr, stderr
-    assert proc.returncode in (130, -signal.SIGINT), stderr  # -2: before Python installed its handler
-    assert stderr in ("", "corpuscle: interrupted\n"), stderr
+    # of the generated console script, exit -2: the script now enters through
+    # corpuscle._entry, which imports the command line where it can catch that
+    import importlib.abc
+    import importlib.metadata
+    import sys
+    from corpuscle import _entry
 
+    scripts = [e for e in importlib.metadata.entry_points(group="console_scripts") if e.name == "corpuscle"]
+    assert scripts and all(e.value == "corpuscle._entry:main" for e in scripts), scripts
+
+    class Interrupted(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            if name == "corpuscle.cli":
+                raise KeyboardInterrupt  # as if Ctrl-C came in the middle of importing it
+            return None
+
+    monkeypatch.delitem(sys.modules, "corpuscle.cli", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Interrupted(), *sys.meta_path])
+    assert _entry.main() == 130
+    assert capsys.readouterr().err == "corpuscle: interrupted\n"
 
 def test_a_disk_full_before_the_first_frame_is_exit_4_and_leaves_no_empty_file(tmp_path):
     # the header did not fit: "cannot write ...", exit 2 as if the input were bad, and an
