@@ -2,7 +2,7 @@
 
 import sys
 
-from .cli import main
+from ._entry import main
 
 # same exit codes as the console script
 sys.exit(main())

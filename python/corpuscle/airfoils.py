@@ -189,6 +189,8 @@ def read_dat(path, normalize_chord: bool = True) -> np.ndarray:
         raw = path.read_bytes()
     except OSError as e:
         raise ValueError(f"{where}: cannot read the airfoil file ({e.strerror or e})") from None
+    if b"\0" in raw:  # text has no NUL bytes: an image, an archive, random bytes
+        raise ValueError(f"{where}: not a text airfoil file (it holds binary data)")
     text = raw.decode("utf-8", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
     rows: list[tuple[int, str]] = []  # (line number, content) without comments and blanks
     for k, line in enumerate(text.split("\n"), start=1):
@@ -210,7 +212,8 @@ def read_dat(path, normalize_chord: bool = True) -> np.ndarray:
     for k, s in body:
         xy = _parse_pair(s)
         if xy is None:
-            raise ValueError(f"{where}:{k}: expected two numbers 'x y', got {s!r}")
+            shown = s if len(s) <= 60 else s[:57] + "..."  # one readable line, not a whole file
+            raise ValueError(f"{where}:{k}: expected two numbers 'x y', got {shown!r}")
         if not all(math.isfinite(v) for v in xy):
             raise ValueError(f"{where}:{k}: non-finite coordinate {s!r}")
         points.append(xy)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import datetime as _dt
+import errno
 import importlib
 import importlib.util
 import json
@@ -135,7 +136,21 @@ def _load_with_options(args: argparse.Namespace, options: dict[str, str]):
         if key is None:
             raise UsageError(f"--particles: scene kind {scene.kind!r} has no particle count (use --set)")
         ovr[key] = args.particles
-    return scene.with_overrides(ovr)
+    try:
+        return scene.with_overrides(ovr)
+    except SceneError as exc:
+        raise _named_by_option(exc, args, options) from None
+
+
+def _named_by_option(exc: SceneError, args: argparse.Namespace, options: dict[str, str]) -> SceneError:
+    """A scene error about a key that a dedicated option set (``--time`` sets
+    ``run.end_time``) says which option it was: the user never typed the key."""
+    given = {key: f"--{attr}" for attr, key in options.items() if getattr(args, attr, None) is not None}
+    for key, option in given.items():
+        if str(exc).startswith(f"{key} "):
+            value = getattr(args, option[2:])
+            return SceneError(f"{option} {value:g}: {exc}" if isinstance(value, float) else f"{option} {value}: {exc}")
+    return exc
 
 
 def _particles_help() -> str:
@@ -431,6 +446,15 @@ def _same_file(a: pathlib.Path, b: pathlib.Path) -> bool:
         return False
 
 
+def _out_path(text: str | None, default: pathlib.Path) -> pathlib.Path:
+    """``--out`` as given (an empty one is an error, not the default), or the default."""
+    if text is None:
+        return default
+    if not text.strip():
+        raise UsageError(f"--out must name a file, got {text!r}")
+    return pathlib.Path(text)
+
+
 def _check_out(out: pathlib.Path, scene) -> None:
     """The output folder must exist, and the output must not be a folder or the scene file."""
     parent = out.parent if str(out.parent) else pathlib.Path(".")
@@ -440,6 +464,13 @@ def _check_out(out: pathlib.Path, scene) -> None:
         raise UsageError(f"--out {out}: is a folder")
     if scene is not None and scene.path and _same_file(out, pathlib.Path(scene.path)):
         raise UsageError(f"--out {out}: is the scene file being run; choose another output")
+
+
+def _check_render(args: argparse.Namespace, out: pathlib.Path) -> None:
+    """``--render`` must not name the frame stream: the picture would replace the run."""
+    render = getattr(args, "render", None)
+    if render and _same_file(pathlib.Path(render), out):
+        raise UsageError(f"--render {render}: is the --out file {out}; choose another")
 
 
 def _run_prepare(args: argparse.Namespace) -> _RunPlan:
@@ -460,8 +491,9 @@ def _run_prepare(args: argparse.Namespace) -> _RunPlan:
         raise UsageError("run needs a SCENE or FILE.toml (or --resume RUN.cps); see `corpuscle run --help`")
     scene = _load_with_options(args, RUN_OPTIONS)
     every = int(scene["run.record_every"])
-    out = pathlib.Path(args.out) if args.out else pathlib.Path(f"{_safe_filename(scene.name)}.cps")
+    out = _out_path(args.out, pathlib.Path(f"{_safe_filename(scene.name)}.cps"))
     _check_out(out, scene)
+    _check_render(args, out)
     if ckpt is not None and ckpt % every:
         raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval "
                          f"(run.record_every = {every})")
@@ -483,7 +515,7 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
     io = importlib.import_module("corpuscle.io")
     src = pathlib.Path(args.resume)
     if not src.is_file():
-        raise UsageError(f"--resume {src}: no such file")
+        raise UsageError(f"--resume {src}: {'is a folder' if src.is_dir() else 'no such file'}")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a torn tail is what a killed run leaves: it is cut off
         run = io.open(src)
@@ -495,7 +527,7 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
             raise UsageError(f"--resume {src}: the run has no checkpoint (record with --checkpoint-every K)")
         frame = run[last]
         state = {name: np.array(frame[name]) for name in frame.fields}
-        step0 = int(frame.step)
+        step0, time0 = int(frame.step), float(frame.time)
     finally:
         run.close()
     params = header.get("parameters")
@@ -506,12 +538,17 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
     # the frames go on holding what the recorded ones hold
     args.velocity = bool(args.velocity or header.get("velocity_recorded"))
     args.ghosts = bool(args.ghosts or header.get("ghosts_recorded"))
-    out = pathlib.Path(args.out) if args.out else src
+    out = _out_path(args.out, src)
     _check_out(out, None)
+    _check_render(args, out)
     if ckpt is None:
         ckpt = header.get("checkpoint_every")
     if ckpt is not None and int(ckpt) % every:
         raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval ({every})")
+    if args.time is not None and not args.time > time0:
+        # an end already passed would take no step and still report success
+        raise UsageError(f"--time {args.time:g} must be after the checkpoint's time {time0:g} s "
+                         f"(step {step0} of {src})")
     # a new end, or the recorded run's own
     if steps is not None or args.time is not None:
         end_time = args.time if args.time is not None else math.inf
@@ -591,6 +628,54 @@ def _live_render(args: argparse.Namespace, header: dict[str, Any]):
         return None
     from . import render
     return render.LiveRender.from_args(args, header)
+
+
+@contextlib.contextmanager
+def _interruptible_init(what: str):
+    """Ctrl-C during initialisation exits at once (130), with one line.
+
+    Placing and building a large scene is one long call into the core (a minute for
+    2,000,000 particles on 2 cores), and Python runs its SIGINT handler only when that call
+    returns. The signal's byte on a wakeup fd reaches a watcher thread as soon as the core
+    lets go of the interpreter (placement and evaluation do); nothing has been written yet,
+    so it ends the process there."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    rfd, wfd = os.pipe()
+    os.set_blocking(wfd, False)
+    lock, state = threading.Lock(), {"done": False}
+
+    def watch() -> None:
+        try:
+            got = os.read(rfd, 64)
+        except OSError:
+            return
+        with lock:
+            if state["done"] or signal.SIGINT not in got:
+                return
+            _err(f"interrupted while {what}")
+            sys.stderr.flush()
+            os._exit(EXIT_INTERRUPTED)
+
+    try:
+        previous = signal.set_wakeup_fd(wfd, warn_on_full_buffer=False)
+    except ValueError:  # not the main interpreter
+        os.close(rfd)
+        os.close(wfd)
+        yield
+        return
+    watcher = threading.Thread(target=watch, name="corpuscle-init-interrupt", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        with lock:
+            state["done"] = True
+        signal.set_wakeup_fd(previous)
+        os.close(wfd)  # the watcher's read returns b"" and it ends
+        watcher.join()
+        os.close(rfd)
 
 
 @contextlib.contextmanager
@@ -676,7 +761,14 @@ def _open_writer(io, plan: _RunPlan, header: dict[str, Any]):
                           resumed_at_step=plan.resume["step"], command=header["command"])
         return io.FrameWriter(out, header)
     except OSError as exc:
-        raise UsageError(f"cannot write {out}: {exc.strerror or _one_line(exc)}") from None
+        error = UsageError(f"cannot write {out}: {exc.strerror or _one_line(exc)}")
+        if exc.errno in _DISK_FULL:
+            error.exit_code = EXIT_WRITE  # the disk, not the input: as when it fills up mid-run
+        raise error from None
+
+
+# errors of a disk that is full (or a file size limit), not of the input
+_DISK_FULL = {getattr(errno, name) for name in ("ENOSPC", "EFBIG", "EDQUOT") if hasattr(errno, name)}
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -688,12 +780,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     # initialisation (timed on its own, not part of steps/s)
     t_init = time.perf_counter()
-    if plan.resume is None:
-        sim = simulation.Simulation.from_scene(scene, backend=args.backend, neighbors=args.neighbors,
-                                               device=args.device)
-    else:
-        sim = simulation.Simulation(scene, backend=args.backend, checkpoint=_checkpoint_state(plan.resume["state"]),
-                                    neighbors=args.neighbors, device=args.device)
+    with _interruptible_init("initialising (nothing written)"):
+        if plan.resume is None:
+            sim = simulation.Simulation.from_scene(scene, backend=args.backend, neighbors=args.neighbors,
+                                                   device=args.device)
+        else:
+            sim = simulation.Simulation(scene, backend=args.backend,
+                                        checkpoint=_checkpoint_state(plan.resume["state"]),
+                                        neighbors=args.neighbors, device=args.device)
     sim.set_end_time(plan.end_time)  # the core shortens the last step to land on it
     start_steps = int(sim.steps)
     init_seconds = time.perf_counter() - t_init
@@ -915,7 +1009,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     _live_options(args, needs_live=False)
     path = pathlib.Path(args.run)
     if not path.is_file():
-        raise UsageError(f"{path}: no such file")
+        raise UsageError(f"{path}: {'is a folder' if path.is_dir() else 'no such file'}")
     live = importlib.import_module("corpuscle.live")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a torn tail: its whole frames are shown
@@ -991,10 +1085,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     batches = [_int_option("--batch", b, minimum=1) for b in args.batch] if args.batch else [None]
     if args.batch and scene.kind != "magic8ball":
         raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
-    if args.json:
+    if args.json is not None:
+        # checked before the benchmark runs, not after it has taken minutes
+        if not args.json.strip():
+            raise UsageError(f"--json must name a file, got {args.json!r}")
         parent = pathlib.Path(args.json).parent
         if not parent.is_dir():
             raise UsageError(f"--json {args.json}: folder {parent} does not exist")
+        if pathlib.Path(args.json).is_dir():
+            raise UsageError(f"--json {args.json}: is a folder")
     simulation = _import_core_module("corpuscle.simulation")
     Simulation = simulation.Simulation
     backends = list(dict.fromkeys(args.backend)) if args.backend else [
@@ -1017,14 +1116,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             if bar is not None:
                 bar.set_description(backend if batch is None else f"{backend} B={batch}")
             t_init = time.perf_counter()
-            if batch is None:
-                sim = Simulation.from_scene(scene, backend=backend, neighbors=index, device=args.device)
-            else:
-                from .batch import Batch
+            with _interruptible_init(f"initialising {backend}"):
+                if batch is None:
+                    sim = Simulation.from_scene(scene, backend=backend, neighbors=index, device=args.device)
+                else:
+                    from .batch import Batch
 
-                # no settling: the timing does not depend on it
-                sim = Batch.from_scene(scene, n=batch, backend=backend, neighbors=index, device=args.device,
-                                       settle=0.0)
+                    # no settling: the timing does not depend on it
+                    sim = Batch.from_scene(scene, n=batch, backend=backend, neighbors=index, device=args.device,
+                                           settle=0.0)
             init_seconds = time.perf_counter() - t_init
             if warmup:
                 sim.step(warmup)
@@ -1257,7 +1357,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not isinstance(exc, _user_errors()) or os.environ.get("CORPUSCLE_DEBUG"):
             raise
         _err(f"error: {_one_line(exc)}")
-        return EXIT_USAGE
+        return int(getattr(exc, "exit_code", EXIT_USAGE))
 
 
 if __name__ == "__main__":

@@ -418,7 +418,69 @@ def _export_vtkhdf(run, indices, out: Path, stem: str, bar, files: AtomicOutputs
                                         {k: v[:0] for k, v in p.cell_data.items()}, p.field_data))
     statics = static_parts(header)
     path = out / f"{stem}.vtkhdf"
-    with h5py.File(files.path(path), "w", track_order=True) as f:
+    with open(files.path(path), "w+b", buffering=0) as raw:  # unbuffered: seek never writes
+        sink = _WriteErrorLatch(raw)
+        _write_vtkhdf(h5py, sink, run, indices, header, order, schemas, statics, bar)
+        if sink.error is not None:
+            raise sink.error
+    return path
+
+
+class _WriteErrorLatch:
+    """The file object h5py writes the .vtkhdf through: the first failed write (a full
+    disk) is kept and later writes are dropped, so HDF5 never sees a failure.
+
+    HDF5 writing a file itself on a full disk failed inside h5py's close: a traceback
+    printed for every open object, then a segmentation fault, and the partial file left
+    behind. Here the export stops after the frame that failed and raises the kept OSError
+    once h5py has closed cleanly (the partial file is then discarded)."""
+
+    def __init__(self, raw):
+        self.raw, self.error = raw, None
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        n = len(view)
+        if self.error is None:
+            try:
+                while view:  # a raw write may take fewer bytes than offered
+                    view = view[self.raw.write(view):]
+            except OSError as exc:
+                self.error = exc
+        if view:  # dropped: move on as if written
+            self.raw.seek(len(view), 1)
+        return n
+
+    def read(self, n: int = -1) -> bytes:
+        return self.raw.read(n)
+
+    def readinto(self, b) -> int:
+        return self.raw.readinto(b)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self.raw.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self.raw.tell()
+
+    def truncate(self, size: int | None = None) -> int:
+        if self.error is None:
+            try:
+                return self.raw.truncate(size)
+            except OSError as exc:
+                self.error = exc
+        return self.raw.tell() if size is None else size
+
+    def flush(self) -> None:
+        if self.error is None:
+            try:
+                self.raw.flush()
+            except OSError as exc:
+                self.error = exc
+
+
+def _write_vtkhdf(h5py, sink, run, indices, header, order, schemas, statics, bar) -> None:
+    with h5py.File(sink, "w", track_order=True) as f:
         root = f.create_group("VTKHDF", track_order=True)
         root.attrs["Version"] = np.array([2, 2], np.int64)
         root.attrs.create("Type", np.bytes_("PartitionedDataSetCollection"),
@@ -438,7 +500,8 @@ def _export_vtkhdf(run, indices, out: Path, stem: str, bar, files: AtomicOutputs
             for p in statics:
                 blocks[p.name].add(float(frame.time), p, reuse=True)
             bar.update(1)
-    return path
+            if sink.error is not None:
+                break  # the disk is full: no point in encoding the rest
 
 
 # ---- entry points ---------------------------------------------------------------------------

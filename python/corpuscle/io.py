@@ -252,7 +252,14 @@ class FrameWriter:
         self._file = builtins.open(self.path, "wb", buffering=0)
         self._end = 0
         self._count = 0
-        self._write_all(b"".join((fixed, struct.pack("<I", crc), body, pad)))
+        try:
+            self._write_all(b"".join((fixed, struct.pack("<I", crc), body, pad)))
+        except BaseException:
+            # not even the header fits (a full disk): leave no empty, unreadable file behind
+            self._file.close()
+            if stat.S_ISREG(os.stat(self.path).st_mode):
+                os.unlink(self.path)
+            raise
 
     @classmethod
     def append(cls, path, *, keep: int | None = None) -> "FrameWriter":
@@ -439,7 +446,9 @@ class FrameWriter:
         if self._file is None or self._file.closed:
             return
         try:
-            os.fsync(self._file.fileno())
+            # a device or a pipe (--out /dev/null) has nothing to sync, and fsync fails on it
+            if stat.S_ISREG(os.fstat(self._file.fileno()).st_mode):
+                os.fsync(self._file.fileno())
         finally:
             self._file.close()
 

@@ -22,6 +22,7 @@ A new kind is a module in ``corpuscle/kinds/`` (which registers its schema here 
 from __future__ import annotations
 
 import copy
+import datetime
 import difflib
 import json
 import math
@@ -100,6 +101,9 @@ class KeySpec:
     dim: int | None = None
     min_length: int | None = None
     max_length: int | None = None
+    #: ``str`` keys that may name a file (``airfoil.shape``): a relative value naming a file in
+    #: the scene file's folder is that file (made absolute), as a ``path`` key's would be
+    file_beside_scene: bool = False
 
     def __post_init__(self) -> None:
         # a schema typo should fail at import, not at the first bad scene
@@ -239,6 +243,8 @@ def _fmt_value(v: Any) -> str:
         return "[" + ", ".join(_fmt_value(x) for x in v) + "]"
     if isinstance(v, Mapping):
         return "{" + ", ".join(f"{k} = {_fmt_value(x)}" for k, x in v.items()) + "}"
+    if isinstance(v, (datetime.date, datetime.time)):  # TOML dates and times, as TOML writes them
+        return v.isoformat()
     return repr(v)
 
 
@@ -259,8 +265,9 @@ def _suggest(word: str, candidates: Iterable[str]) -> str | None:
 
 
 def _is_bool(v: Any) -> bool:
-    # Python's bool and NumPy's bool_ (which is not a subclass of it)
-    return isinstance(v, bool) or type(v).__name__ == "bool_"
+    # Python's bool and NumPy's bool_ (which is not a subclass of it; its type is named
+    # "bool_" in NumPy 1 and "bool" in NumPy 2)
+    return isinstance(v, bool) or (type(v).__module__ == "numpy" and type(v).__name__ in ("bool_", "bool"))
 
 
 def _is_integer(v: Any) -> bool:
@@ -361,6 +368,10 @@ def check_value(key: str, spec: KeySpec, value: Any, base: str | os.PathLike | N
             hint = _suggest(value, spec.choices)
             extra = f" (did you mean {json.dumps(hint)}?)" if hint else ""
             raise SceneError(f"{key} must be {spec.describe()}, got {_fmt_value(value)}{extra}")
+        if spec.file_beside_scene and base is not None and value.strip():
+            beside = pathlib.Path(base) / os.path.expanduser(value.strip())
+            if beside.is_file():
+                return str(pathlib.Path(os.path.abspath(beside)))
         return value
     # vectors: exactly 2 or 3 finite numbers, each within the bounds
     if t in _VECTORS:
@@ -529,6 +540,8 @@ def _override_path(spec: KeySpec | None, value: Any) -> Any:
         expanded = os.path.expanduser(value)
         if not os.path.isabs(expanded):
             return os.path.abspath(expanded)
+    if spec is not None and spec.file_beside_scene and isinstance(value, str) and os.path.isfile(value.strip()):
+        return os.path.abspath(os.path.expanduser(value.strip()))
     return value
 
 
@@ -713,6 +726,8 @@ def load_scene(name_or_path: str | os.PathLike, overrides: Mapping[str, Any] | N
     dotted-key ``overrides`` (validated the same way). Raises :class:`SceneError`."""
     # a path-like object is always a file; a bare name is a built-in first
     is_path = isinstance(name_or_path, os.PathLike)
+    if not is_path and not isinstance(name_or_path, str):
+        raise TypeError(f"scene must be a built-in scene name, a TOML file path or a Scene, got {name_or_path!r}")
     text = os.fspath(name_or_path)
     if not is_path and not _looks_like_path(text):
         names = _builtin_names()
@@ -755,7 +770,13 @@ def parse_set(expr: str) -> tuple[str, object]:
     key, _, raw = expr.partition("=")
     key, raw = key.strip(), raw.strip()
     if not _KEY_RE.match(key):
-        raise SceneError(f"--set expects a dotted key before '=', got {_fmt_value(key)} in {_fmt_value(expr)}")
+        head = key.split(".", 1)[0]
+        if "." in key and any(head in k.arrays for k in KINDS.values()):
+            # shake.0.start: one window of an array of tables cannot be set on its own
+            raise SceneError(f"--set {key}: [[{head}]] entries are set all at once, as "
+                             f"--set '{head}=[{{...}}, ...]' (see `corpuscle scenes --keys`)")
+        raise SceneError(f"--set expects a dotted key (names joined by dots, each starting with a letter) before '=', "
+                         f"got {_fmt_value(key)} in {_fmt_value(expr)}")
     if not raw:
         raise SceneError(f"--set {key}= has no value")
     try:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import numbers
 import time as _time
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -111,6 +111,12 @@ class CoreHandle:
         return mutating
 
 
+def _check_state(state) -> None:
+    """A checkpoint is the mapping Simulation.checkpoint() returns."""
+    if not isinstance(state, Mapping):
+        raise TypeError(f"checkpoint must be the dict Simulation.checkpoint() returns, got {state!r}")
+
+
 class Simulation:
     """A scene running on one backend.
 
@@ -124,6 +130,8 @@ class Simulation:
 
     def __init__(self, scene, backend: str = "auto", checkpoint: dict | None = None,
                  neighbors: str | None = None, device: int = 0):
+        if checkpoint is not None:
+            _check_state(checkpoint)
         self.scene = scene
         self.backend = resolve_backend(backend)
         kinds = dict(_core().kinds())
@@ -192,6 +200,8 @@ class Simulation:
         kind = _kinds.find(scene.kind)
         particle_key = kind.particle_key if kind is not None else None
         aliases = {"seed": "run.seed", "end_time": "run.end_time"}
+        if overrides is not None and not isinstance(overrides, Mapping):
+            raise TypeError(f"overrides must be a mapping of dotted keys to values, got {overrides!r}")
         ovr = dict(overrides or {})
         for k, v in kwargs.items():
             if k == "particles":
@@ -224,6 +234,8 @@ class Simulation:
         `callback(sim)` is called after every `chunk` steps; it may return True to stop.
         """
         if until is not None:
+            if not isinstance(until, numbers.Real) or isinstance(until, (bool, np.bool_)):
+                raise TypeError(f"until must be a number of seconds, got {until!r}")
             until = float(until)
             if not math.isfinite(until):
                 raise ValueError(f"until must be a finite time, got {until!r}")
@@ -296,6 +308,7 @@ class Simulation:
 
     def restore(self, state: dict) -> None:
         """Replace the whole state by one :meth:`checkpoint` returned (the end time stays)."""
+        _check_state(state)
         fields = [f for f in self._fields if f["checkpointed"]]
         missing = [f["name"] for f in fields if f["name"] not in state]
         if missing:
@@ -385,6 +398,8 @@ class Simulation:
         a zero-copy view (NumPy on the CPU; on CUDA an array exposing ``__dlpack__`` for
         CuPy/PyTorch), valid until the next step. Particles are reordered every step; ``id``
         gives each one's persistent index."""
+        if not isinstance(name, str):
+            raise TypeError(f"field name must be a string, got {name!r}")
         return self.core.download(name) if copy else self.core.view(name)
 
     @property

@@ -300,12 +300,15 @@ def core():
     return c
 
 
-def count(name: str, value, minimum: int = 0) -> int:
-    """An integer argument (Python or NumPy integer, not bool or float) >= minimum."""
-    if isinstance(value, bool) or type(value).__name__ == "bool_" or not isinstance(value, numbers.Integral):
+def count(name: str, value, minimum: int = 0, maximum: int = 2**63 - 1) -> int:
+    """An integer argument (Python or NumPy integer, not bool or float) in [minimum,
+    maximum] (by default what the core's 64-bit integers hold)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an integer, got {value!r}")
     if int(value) < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {int(value)}")
+    if int(value) > maximum:
+        raise ValueError(f"{name} must be <= {maximum}, got {int(value)}")
     return int(value)
 
 
@@ -343,7 +346,17 @@ def particle_array(name: str, value, n: int, components: int = 3, dtype=np.float
     if bad.size:
         i = int(bad[0])
         raise ValueError(f"{name}[{i}] = {arr[i].tolist()} is not finite ({bad.size} rows are not)")
-    return np.ascontiguousarray(arr, dtype=dtype)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.ascontiguousarray(arr, dtype=dtype)
+    # finite in float64 but not in the core's dtype (1e300 as float32 is inf): the step would
+    # start from a non-finite state
+    rows = np.isfinite(out) if out.ndim == 1 else np.isfinite(out).all(axis=1)
+    bad = np.flatnonzero(~rows)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"{name}[{i}] = {arr[i].tolist()} does not fit in {np.dtype(dtype).name} "
+                         f"({bad.size} rows do not)")
+    return out
 
 
 def fmt_bytes(b: float) -> str:

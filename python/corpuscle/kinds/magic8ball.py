@@ -344,8 +344,14 @@ class Magic8Ball(Kind):
     def control(self, sim, acceleration=(0.0, 0.0, 0.0), torque=(0.0, 0.0, 0.0)) -> dict[str, list[float]]:
         """Container linear acceleration (m/s²) and shell torque (N·m) for the next steps,
         added to the scene's shake schedule; every backend applies it identically."""
-        return {"acceleration": finite_vector("acceleration", acceleration),
-                "torque": finite_vector("torque", torque)}
+        out = {"acceleration": finite_vector("acceleration", acceleration),
+               "torque": finite_vector("torque", torque)}
+        for name, values in out.items():  # the bounds of a [[shake]] window's keys
+            spec = SHAKE_KEYS[name]
+            if any(not spec.lo <= x <= spec.hi for x in values):
+                raise ValueError(f"{name} must be 3 numbers each in [{spec.lo:g}, {spec.hi:g}] {spec.unit}, "
+                                 f"got {values}")
+        return out
 
     def check_positions(self, sim, positions: np.ndarray) -> None:
         """Every position inside the container."""

@@ -87,7 +87,8 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
                              "inflow.thermal = 1 / S (0: inflow.thermal decides)"),
     # the airfoil
     "airfoil.shape": _K("str", "e398", "", doc="'e398' (shipped), a NACA 4-digit code ('naca2412'), "
-                        "'flat-plate', or the path of a Selig/Lednicer .dat file"),
+                        "'flat-plate', or the path of a Selig/Lednicer .dat file (relative: to the scene "
+                        "file's folder)", file_beside_scene=True),
     "airfoil.chord": _K("float", 0.5, "m", 0.0, 1e3, "chord length", lo_open=True),
     "airfoil.angle_of_attack": _K("float", 10.0, "deg", -90.0, 90.0, "angle of attack, nose up positive"),
     "airfoil.leading_edge": _K("vec2", [-1.2, 0.0], "m", -1e4, 1e4, "leading-edge position"),
@@ -257,6 +258,12 @@ class WindTunnel(Kind):
         poly = airfoil_polygon(v)
         free_area = L * H - abs(airfoils.signed_area(poly))
         radius = float(v["gas.radius"]) or math.sqrt(float(v["gas.solid_fraction"]) * free_area / (math.pi * n))
+        if not H > 2 * radius:
+            given = (f"gas.radius = {radius:g} m" if v["gas.radius"] else
+                     f"gas.radius = {radius:.3g} m (from gas.solid_fraction = {v['gas.solid_fraction']:g} "
+                     f"and gas.particles = {n})")
+            raise SceneError(f"{given} does not fit in the channel: channel.height = {H:g} m must be more than "
+                             f"a diameter")
         m = float(v["gas.mass"])
         laws = {}
         for key, m_eff in (("contact", m / 2), ("wall", m), ("wing", m)):
@@ -319,7 +326,9 @@ class WindTunnel(Kind):
             raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
                              f"(lattice spacing {a:.3g} m < a diameter)")
         while True:
-            nx, ny = int(ext[0] / a), int(ext[1] / a)
+            # at least one site each way: a spacing wider than the channel (a handful of
+            # particles) would leave no row and divide by zero
+            nx, ny = max(1, int(ext[0] / a)), max(1, int(ext[1] / a))
             xs = lo[0] + radius + (np.arange(nx) + 0.5) * (ext[0] / nx)
             ys = lo[1] + radius + (np.arange(ny) + 0.5) * (ext[1] / ny)
             X, Y = np.meshgrid(xs, ys, indexing="ij")
@@ -439,6 +448,12 @@ class WindTunnel(Kind):
         x, p = values["speed_scale"], values["pitch"]
         if not math.isfinite(x) or x <= -1.0:
             raise ValueError(f"speed_scale must be finite and > -1, got {speed_scale!r}")
+        # the stream within inflow.speed's own range: faster, dt (a fraction of a radius per
+        # step at the fastest particle) shrinks until the run stands still in simulated time
+        top, U = float(WIND_TUNNEL_KEYS["inflow.speed"].hi), float(sim.info["speed"])
+        if U * (1.0 + x) > top:
+            raise ValueError(f"speed_scale = {x:g} makes the stream U (1 + speed_scale) = {U * (1.0 + x):.4g} m/s, "
+                             f"above inflow.speed's bound {top:g} m/s")
         if not math.isfinite(p) or abs(p) > MAX_PITCH:
             raise ValueError(f"pitch must be finite degrees in [-{MAX_PITCH:g}, {MAX_PITCH:g}], got {pitch!r}")
         return {"speed_scale": [x], "pitch": [p]}

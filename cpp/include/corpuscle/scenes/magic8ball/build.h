@@ -1,6 +1,7 @@
 // The Magic 8-Ball built from its parameters (SI values, as python/corpuscle/kinds/
 // magic8ball.py writes them) and made on an Exec with an index plug-in.
 #pragma once
+#include <cstdio>
 #include <memory>
 #include <string>
 
@@ -35,8 +36,14 @@ inline Model build_model(const ParamSource& p) {
   // the grid covers the sphere and the ghosts mirrored up to the list radius beyond it
   float ext = m.wall.radius + m.list_radius;
   m.grid = make_grid<D>(Vec3{{-ext, -ext, -ext}}, Vec3{{ext, ext, ext}}, m.list_radius);
-  if (m.grid.bits > morton_max_bits<D>())
-    throw Error("magic8ball: the grid needs more than 1024 cells per axis (h too small for the container)");
+  if (m.grid.bits > morton_max_bits<D>()) {
+    char msg[320];
+    std::snprintf(msg, sizeof msg,
+                  "magic8ball: container.radius = %g m spans more than %d cells per axis of the neighbour "
+                  "radius h (1 + sph.skin) = %g m: lower container.radius or raise sph.h (sph.scale_h = false)",
+                  double(m.wall.radius), 1 << morton_max_bits<D>(), double(m.list_radius));
+    throw Error(msg);
+  }
   auto shakes = p.tables("shakes");
   if (shakes.size() > size_t(kMaxShakes))
     throw Error("magic8ball: at most " + std::to_string(kMaxShakes) + " shake windows");
