@@ -349,11 +349,20 @@ def test_run_live_streams_frames_and_rejects_bad_messages(tmp_path):
                     a = await receive_frame(ws, 30)
                     await ws.send_str('{"type": "control", "acceleration": [NaN, 0, 0]}')
                     await ws.send_str('{"type": "control", "acceleration": [5, 0, 0]}')
-                    b = await receive_frame(ws, 30)
-                    c = await receive_frame(ws, 30)
-                    assert a["step"] < b["step"] < c["step"] and c["meta"]["control"] in (None, {"acceleration": [5.0, 0, 0], "torque": [0, 0, 0]})
-                    d = await receive_frame(ws, 30)
-                    assert d["meta"]["control"] == {"acceleration": [5.0, 0.0, 0.0], "torque": [0.0, 0.0, 0.0]}
+                    # frames already on their way may predate the control (the server keeps up
+                    # to two ahead of the page): within a few frames every one carries it
+                    want = {"acceleration": [5.0, 0.0, 0.0], "torque": [0.0, 0.0, 0.0]}
+                    steps, seen = [a["step"]], None
+                    for k in range(12):
+                        f = await receive_frame(ws, 30)
+                        steps.append(f["step"])
+                        if f["meta"]["control"] == want:
+                            seen = k
+                            break
+                    assert seen is not None and seen <= 6, steps
+                    assert steps == sorted(steps) and len(set(steps)) == len(steps)  # the run went on
+                    later = await receive_frame(ws, 30)
+                    assert later["step"] > steps[-1] and later["meta"]["control"] == want
 
         asyncio.run(go())
     finally:
