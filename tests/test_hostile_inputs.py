@@ -373,7 +373,7 @@ def test_vtkhdf_export_on_a_full_disk_is_one_line_and_leaves_nothing(tmp_path):
 
     p = subprocess.run([script(), "export", str(run), "--format", "vtkhdf", str(out)], capture_output=True, text=True,
                        timeout=120, preexec_fn=limit)
-    assert p.returncode == 2, p.stderr[-2000:]
+    assert p.returncode == 4, p.stderr[-2000:]  # the disk, not the input: as run's full disk
     assert p.stderr == f"corpuscle: error: cannot write into {out}: File too large\n", p.stderr[-2000:]
     assert not out.exists()
 
@@ -419,3 +419,37 @@ def test_a_disk_full_before_the_first_frame_is_exit_4_and_leaves_no_empty_file(t
     assert p.returncode == 4, p.stderr
     assert p.stderr == f"corpuscle: error: cannot write {out}: File too large\n"
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["render", "plot"])
+def test_render_and_plot_on_a_full_disk_exit_4_as_run_does(tmp_path, command):
+    # a full disk (here a file size limit) was exit 2, as if the input were wrong
+    pytest.importorskip("matplotlib")
+    import resource
+    import signal
+    import subprocess
+    from cli_script import script
+    run = tmp_path / "r.cps"
+    p = run_cli("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "4", "--every", "2",
+                "--out", run)
+    assert p.returncode == 0, p.stderr
+    out = tmp_path / "picture.png"
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2_000, 2_000))
+
+    args = [str(run), "-o", str(out)] + (["--frame", "0"] if command == "render" else [])
+    p = subprocess.run([script(), command, *args], capture_output=True, text=True, timeout=120, preexec_fn=limit)
+    assert p.returncode == 4, p.stderr[-2000:]
+    assert len(p.stderr.strip().splitlines()) == 1 and "File too large" in p.stderr, p.stderr[-2000:]
+    assert not out.exists()
+
+
+def test_a_negative_end_time_is_refused():
+    # was taken: every later step a silent no-op
+    sim = corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=300)
+    with pytest.raises(ValueError, match="end time must not be negative.*-1"):
+        sim.set_end_time(-1)
+    sim.set_end_time(0.0)  # the start itself is an end: no step is taken
+    assert sim.step(3) == 0

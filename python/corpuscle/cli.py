@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import datetime as _dt
-import errno
 import importlib
 import importlib.util
 import json
@@ -36,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 from . import kinds as _kinds
+from ._errors import DISK_FULL_ERRNOS as _DISK_FULL, EXIT_WRITE  # a full disk or a file size limit: exit 4
 from ._frame_sink import FrameSink
 from .scene import SceneError, builtin_scenes, load_scene, parse_set
 
@@ -334,7 +334,6 @@ register(Command("info", "show the version, build options and usable GPUs", _con
 
 # dedicated options -> the run keys every kind has (--particles sets the kind's particle key)
 RUN_OPTIONS = {"seed": "run.seed", "time": "run.end_time", "every": "run.record_every"}
-EXIT_WRITE = 4  # the output could not be written (disk full, file too large, I/O error)
 
 
 def _add_engine_options(p: argparse.ArgumentParser) -> None:
@@ -767,8 +766,6 @@ def _open_writer(io, plan: _RunPlan, header: dict[str, Any]):
         raise error from None
 
 
-# errors of a disk that is full (or a file size limit), not of the input
-_DISK_FULL = {getattr(errno, name) for name in ("ENOSPC", "EFBIG", "EDQUOT") if hasattr(errno, name)}
 
 
 def _cmd_run(args: argparse.Namespace) -> int:

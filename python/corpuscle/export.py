@@ -28,6 +28,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ._camera import quat_matrix
+from ._errors import write_failure
 from ._viz_common import (AtomicOutputs, cli_warnings, missing_dirs, open_run, os_reason, parse_frames, prepare_dir,
                           remove_dirs, require, run_stem, scene_info)
 
@@ -536,7 +537,7 @@ def export_run(run, out_dir, *, format: str = "vtk", frames=None, progress: bool
         files.discard()
         remove_dirs(created)  # the folders this export made, if empty again
         if isinstance(exc, OSError):
-            raise ExportError(f"cannot write into {out}: {os_reason(exc)}") from None
+            raise write_failure(ExportError, f"cannot write into {out}: {os_reason(exc)}", exc) from None
         raise
     return result
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._errors import write_failure
 from ._viz_common import AtomicOutputs, check_file_output, cli_warnings, open_run, os_reason, require, scene_name, units_of
 
 
@@ -148,7 +149,7 @@ def plot_run(run, out=None, *, series: list[str] | str | None = None, width: flo
                 files.commit()
             except OSError as exc:
                 files.discard()
-                raise PlotError(f"cannot write {out}: {os_reason(exc)}") from None
+                raise write_failure(PlotError, f"cannot write {out}: {os_reason(exc)}", exc) from None
     return fig
 
 

@@ -31,6 +31,7 @@ import numpy as np
 
 from . import _camera, _colors, _overlay
 from ._video import VideoSink, open_sink, output_kind
+from ._errors import write_failure
 from ._viz_common import (os_reason, cli_warnings, open_run, parse_frames, parse_index, parse_size, require,
                           scene_info, turned_points, units_of)
 
@@ -600,7 +601,7 @@ def _open_sink(out, size, fps) -> VideoSink:
     try:
         return open_sink(out, size, fps, RenderError)
     except OSError as exc:
-        raise RenderError(f"cannot write {out}: {os_reason(exc)}") from None
+        raise write_failure(RenderError, f"cannot write {out}: {os_reason(exc)}", exc) from None
 
 
 @dataclass
@@ -629,7 +630,7 @@ class LiveRender:
         try:
             self.sink.add(img)
         except OSError as exc:
-            raise RenderError(f"cannot write {self.sink.path}: {os_reason(exc)}") from None
+            raise write_failure(RenderError, f"cannot write {self.sink.path}: {os_reason(exc)}", exc) from None
         return img
 
     def close(self) -> None:
@@ -637,7 +638,7 @@ class LiveRender:
         try:
             self.sink.close()
         except OSError as exc:
-            raise RenderError(f"cannot write {self.sink.path}: {os_reason(exc)}") from None
+            raise write_failure(RenderError, f"cannot write {self.sink.path}: {os_reason(exc)}", exc) from None
 
     def abort(self) -> None:
         """Give up on the output: nothing of it is left behind."""
@@ -721,7 +722,7 @@ def render_run(run, out, *, frames=None, frame=None, size=(1280, 720), fps: floa
         sink.close()
     except OSError as exc:
         sink.abort()
-        raise RenderError(f"cannot write {out}: {os_reason(exc)}") from None
+        raise write_failure(RenderError, f"cannot write {out}: {os_reason(exc)}", exc) from None
     except BaseException:
         sink.abort()
         raise

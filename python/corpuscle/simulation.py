@@ -264,6 +264,8 @@ class Simulation:
         (t = inf: no end)."""
         if not isinstance(t, numbers.Real) or isinstance(t, bool) or math.isnan(t):
             raise ValueError(f"end time must be a number of seconds, got {t!r}")
+        if t < 0:
+            raise ValueError(f"end time must not be negative (simulated time starts at 0 s), got {t!r}")
         self.core.set_end_time(float(t))
 
     def set_control(self, *args, **kwargs) -> None:
