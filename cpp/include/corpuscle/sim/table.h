@@ -63,6 +63,26 @@ struct Clock {
   X(bad, int, 1, clock.bad, false)                 \
   X(bad_step, long long, 1, clock.bad_step, false)
 
+// The clock's part of every kind's finalize: a step at or past the end time is not taken
+// (the clock says done), a step that would pass it is shortened to land on it, and a step
+// taken advances the clock (landing exactly on the end time, after which steps are no-ops)
+CPS_HD CPS_INLINE bool clock_at_end(Clock& C) {
+  if (!C.done && C.time < C.end_time) return false;
+  C.done = 1;
+  return true;
+}
+// dt, shortened to end on the end time; `last`: this step reaches it
+CPS_HD CPS_INLINE float clip_to_end(const Clock& C, float dt, bool& last) {
+  last = C.time + double(dt) >= C.end_time;
+  return last ? float(C.end_time - C.time) : dt;
+}
+CPS_HD CPS_INLINE void advance_clock(Clock& C, float dt, bool last) {
+  C.dt = dt;
+  C.time = last ? C.end_time : C.time + double(dt);
+  C.done = last ? 1 : 0;
+  C.step += 1;
+}
+
 // a scene whose run is over (end time reached) or unsound: its steps are no-ops
 template <class Record>
 CPS_HD CPS_INLINE bool halted(const Record* g) {

@@ -435,8 +435,7 @@ struct FinalizeStage {
     const Model& m = *model;
     Scene& G = g[scene];
     Clock& C = G.clock;
-    if (C.done || C.time >= C.end_time) {
-      C.done = 1;
+    if (clock_at_end(C)) {
       G.step_dt = 0.0f;
       return;
     }
@@ -450,9 +449,8 @@ struct FinalizeStage {
     G.rebuilds += G.rebuild[C.step & 1];
     G.rebuild[C.step & 1] = 0;  // this step's readers are done with its flag
     const StepSums& S = sums ? sums[scene] : G.pending;
-    float dt = sums_dt(m, G.phys, S, G.die);
-    const bool last = C.time + double(dt) >= C.end_time;
-    if (last) dt = float(C.end_time - C.time);
+    bool last;
+    const float dt = clip_to_end(C, sums_dt(m, G.phys, S, G.die), last);
     // faults found before integrating: a non-finite state is not integrated (the state
     // stays as it was); a runaway speed is integrated once more and then stops the run
     int fault = 0;
@@ -479,10 +477,7 @@ struct FinalizeStage {
     G.shell_omega += G.frame.alpha * dt;
     G.shell_q = qintegrate_body(G.shell_q, G.shell_omega, dt);
     G.step_dt = dt;
-    C.dt = dt;
-    C.time = last ? C.end_time : C.time + double(dt);  // land exactly on the end time
-    C.done = last ? 1 : 0;                              // and stop there: later steps are no-ops
-    C.step += 1;
+    advance_clock(C, dt, last);  // land exactly on the end time and stop there
     if (runaway) {
       C.bad = kBadSpeed;
       C.bad_step = C.step;

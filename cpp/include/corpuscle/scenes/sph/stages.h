@@ -187,8 +187,7 @@ struct FinalizeStage {
     const Model<D>& m = *model;
     Scene& G = *g;
     Clock& C = G.clock;
-    if (C.done || C.time >= C.end_time) {
-      C.done = 1;
+    if (clock_at_end(C)) {
       G.step_dt = 0.0f;
       return;
     }
@@ -204,17 +203,14 @@ struct FinalizeStage {
       G.step_dt = 0.0f;
       return;
     }
-    float dt = choose_dt_cfl(m.cfl, m.hs, fsqrt(S.amax2), m.c0, S.mu_max, m.dt_min, m.dt_max);
-    const bool last = C.time + double(dt) >= C.end_time;
-    if (last) dt = float(C.end_time - C.time);
+    bool last;
+    const float dt = clip_to_end(C, choose_dt_cfl(m.cfl, m.hs, fsqrt(S.amax2), m.c0, S.mu_max, m.dt_min, m.dt_max),
+                                 last);
     G.sums = S;
     if (G.outside > G.outside_max) G.outside_max = G.outside;
     G.outside = 0;
     G.step_dt = dt;
-    C.dt = dt;
-    C.time = last ? C.end_time : C.time + double(dt);
-    C.done = last ? 1 : 0;
-    C.step += 1;
+    advance_clock(C, dt, last);
   }
 };
 

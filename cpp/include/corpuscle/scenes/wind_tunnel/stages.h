@@ -378,8 +378,7 @@ struct FinalizeStage {
     const Model& m = *model;
     Scene& G = *g;
     Clock& C = G.clock;
-    if (C.done || C.time >= C.end_time) {
-      C.done = 1;
+    if (clock_at_end(C)) {
       G.step_dt = 0.0f;
       return;
     }
@@ -395,17 +394,13 @@ struct FinalizeStage {
       G.step_dt = 0.0f;
       return;
     }
-    float dt = choose_dt(m, S.vmax2);
-    const bool last = C.time + double(dt) >= C.end_time;
-    if (last) dt = float(C.end_time - C.time);
+    bool last;
+    const float dt = clip_to_end(C, choose_dt(m, S.vmax2), last);
     G.sums = S;
     // the forces of this step's state act over [time, time + dt]
     if (C.time >= m.measure_start) accumulate_blocks(G, S, double(dt));
     G.step_dt = dt;
-    C.dt = dt;
-    C.time = last ? C.end_time : C.time + double(dt);
-    C.done = last ? 1 : 0;
-    C.step += 1;
+    advance_clock(C, dt, last);
   }
 };
 
