@@ -63,6 +63,17 @@ struct Clock {
   X(bad, int, 1, clock.bad, false)                 \
   X(bad_step, long long, 1, clock.bad_step, false)
 
+// a new scene's clock: time 0, no end, no step taken, sound
+CPS_HD CPS_INLINE Clock start_clock() {
+  Clock c{};
+  c.time = 0.0;
+  c.end_time = 1e300;
+  c.step = 0;
+  c.dt = 0.0f;
+  c.bad_step = -1;
+  return c;
+}
+
 // The clock's part of every kind's finalize: a step at or past the end time is not taken
 // (the clock says done), a step that would pass it is shortened to land on it, and a step
 // taken advances the clock (landing exactly on the end time, after which steps are no-ops)

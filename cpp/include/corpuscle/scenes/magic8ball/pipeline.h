@@ -92,11 +92,7 @@ class Pipeline {
   static Scene initial_record(const RigidState& die, const ScenePhysics& phys) {
     Scene s{};
     s.phys = phys;
-    s.clock.time = 0.0;
-    s.clock.end_time = 1e300;
-    s.clock.step = 0;
-    s.clock.dt = 0.0f;
-    s.clock.bad_step = -1;
+    s.clock = start_clock();
     s.die = die;
     s.shell_q = Quat::identity();
     s.shell_omega = Vec3::zero();

@@ -85,11 +85,7 @@ class Pipeline {
 
   static Scene initial_record(const Model& m) {
     Scene s{};
-    s.clock.time = 0.0;
-    s.clock.end_time = 1e300;
-    s.clock.step = 0;
-    s.clock.dt = 0.0f;
-    s.clock.bad_step = -1;
+    s.clock = start_clock();
     s.sums = s.pending = StepSums::identity();
     s.block_len = m.block_time;
     return s;
