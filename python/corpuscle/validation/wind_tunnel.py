@@ -200,8 +200,8 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
     chunk = max(1, int(round(min(0.005, window / 64.0) / num["dt"])))  # a density sample every 5 ms (or window/64)
 
     def strip_density():
-        x = sim.positions[:, 0]
-        fresh = sim.field("scattered") == 0
+        x = sim.field("position", copy=True)[:, 0]  # host copies (a view on CUDA is a device array)
+        fresh = sim.field("scattered", copy=True) == 0
         return np.count_nonzero(fresh & (x > strip_lo) & (x < strip_hi)) / strip_area
 
     times, dens = [0.0], [strip_density()]
