@@ -34,6 +34,7 @@ __all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "resti
 MAX_PITCH = 45.0
 
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
+KMAX_ROWS = 4096  # the inflow conveyor's rows the core holds (scenes/wind_tunnel/model.h kMaxRows)
 
 UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)",
                     2: "an LBVH traversal stack would have overflowed (the tree is deeper than 64 levels)"}
@@ -85,6 +86,9 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "inflow.speed_ratio": _K("float", 0.0, "", 0.0, 1e6,
                              "speed ratio S = U / sqrt(2 kT / m) of the Maxwellian free stream; > 0 sets "
                              "inflow.thermal = 1 / S (0: inflow.thermal decides)"),
+    "inflow.lattice": _K("bool", True, "", doc="a cold beam with contacts re-enters as the start's lattice "
+                         "(slots moving in at U: no particle lands on another); false: at uniformly random "
+                         "heights (overlaps heat the stream)"),
     # the airfoil
     "airfoil.shape": _K("str", "e398", "", doc="'e398' (shipped), a NACA 4-digit code ('naca2412'), "
                         "'flat-plate', or the path of a Selig/Lednicer .dat file (relative: to the scene "
@@ -290,6 +294,8 @@ class WindTunnel(Kind):
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
+        if params["collide"] and params["thermal"] == 0.0 and v["inflow.lattice"]:
+            params.update(self._conveyor(n, radius, lo, hi, poly))
         check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius")),
                      f"{n} particles")
         if len(poly) > 1024:
@@ -319,6 +325,8 @@ class WindTunnel(Kind):
         rng = np.random.default_rng(seed)
         if not params.get("collide", 1):
             return WindTunnel._place_uniform(n, radius, lo, hi, poly, params, rng)
+        if params.get("conv_rows", 0):
+            return WindTunnel._place_conveyor(n, radius, lo, hi, poly, params, rng)
         ext = hi - lo - 2 * radius
         free = float(np.prod(ext)) - abs(airfoils.signed_area(poly))
         a = math.sqrt(free / (n * 1.1))
@@ -354,6 +362,69 @@ class WindTunnel(Kind):
         vel[:, 0] = U
         if sigma > 0:
             vel += rng.normal(0.0, sigma, vel.shape)
+        return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
+
+    @staticmethod
+    def _conveyor_slots(radius, lo, hi, rows, dx, dy):
+        """Unjittered slot centres of the cold beam's lattice over the channel: row r at height
+        y0 + r dy, columns dx apart from the inlet at the row's phase (stages.h, "The inflow
+        conveyor": the same formula, so the stream entering later continues this lattice)."""
+        y0 = lo[1] + radius + 0.5 * dy
+        g = np.arange(rows) * 0.6180339887498949
+        phase = dx * (g - np.floor(g))
+        L = hi[0] - lo[0]
+        ncol = np.maximum(np.ceil((L - phase) / dx).astype(np.int64) - 1, 0)  # columns 1 .. ncol, x < hi
+        r = np.repeat(np.arange(rows), ncol)
+        c = np.concatenate([np.arange(1, k + 1) for k in ncol]) if rows else np.empty(0, np.int64)
+        x = lo[0] + phase[r] + c * dx
+        keep = x < hi[0]
+        return np.column_stack([x[keep], y0 + r[keep] * dy])
+
+    @staticmethod
+    def _conveyor(n, radius, lo, hi, poly) -> dict:
+        """The inflow conveyor of a cold beam with contacts: the start lattice's rows and
+        spacing (n sites and 10% more over the free area, as the random-height start had), so
+        the stream that enters later is the lattice the run starts from. Deterministic (no
+        random numbers): a resumed run rebuilds the same one. More rows than the core holds
+        (stages.h kMaxRows): no conveyor (re-entry at random heights)."""
+        ext = hi - lo - 2 * radius
+        free = float(np.prod(ext)) - abs(airfoils.signed_area(poly))
+        a = math.sqrt(free / (n * 1.1))
+        while True:
+            if a <= 2 * radius * 1.0001:
+                raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
+                                 f"(lattice spacing {a:.3g} m < a diameter)")
+            rows = max(1, int(ext[1] / a))
+            if rows > KMAX_ROWS:
+                return {"conv_rows": 0}
+            dy, dx = ext[1] / rows, a
+            pts = WindTunnel._conveyor_slots(radius, lo, hi, rows, dx, dy)
+            jitter = 0.45 * math.hypot(dx - 2 * radius, dy - 2 * radius)
+            if len(pts) >= n and np.count_nonzero(WindTunnel._clear(pts, poly, 1.05 * radius + jitter)) >= n:
+                return {"conv_rows": rows, "conv_y0": lo[1] + radius + 0.5 * dy, "conv_dy": dy, "conv_dx": dx}
+            a *= 0.97
+
+    @staticmethod
+    def _clear(pts, poly, clearance):
+        box_lo, box_hi = poly.min(axis=0) - clearance, poly.max(axis=0) + clearance
+        near = np.all((pts > box_lo) & (pts < box_hi), axis=1)
+        keep = np.ones(len(pts), dtype=bool)
+        if near.any():
+            keep[near] = signed_distance(poly, pts[near]) > clearance
+        return keep
+
+    @staticmethod
+    def _place_conveyor(n, radius, lo, hi, poly, params, rng):
+        """The start as the conveyor's lattice (see _conveyor): its slots jittered as the entering
+        ones are, those 1.05 radii clear of the airfoil kept, n of them drawn at random."""
+        rows, dx, dy = params["conv_rows"], params["conv_dx"], params["conv_dy"]
+        pts = WindTunnel._conveyor_slots(radius, lo, hi, rows, dx, dy)
+        pts = pts + rng.uniform(-1, 1, pts.shape) * 0.45 * np.array([dx - 2 * radius, dy - 2 * radius])
+        pts = pts[WindTunnel._clear(pts, poly, 1.05 * radius)]  # (_conveyor made sure n of them are)
+        pick = np.sort(rng.choice(len(pts), size=n, replace=False))
+        pos = pts[pick]
+        vel = np.zeros_like(pos)
+        vel[:, 0] = params["speed"]
         return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
 
     @staticmethod

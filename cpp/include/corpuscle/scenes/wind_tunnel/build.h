@@ -49,6 +49,16 @@ inline Model build_model(const ParamSource& p, const ArraySource* arrays) {
   m.block_time = p.number("block_time");
   if (!(m.block_time > 0.0)) throw Error("wind-tunnel: block_time must be positive");
   m.seed = unsigned(p.integer("seed") & 0xffffffffLL);
+  m.conv_rows = p.has("conv_rows") ? int(p.integer("conv_rows")) : 0;
+  if (m.conv_rows < 0 || m.conv_rows > kMaxRows)
+    throw Error("wind-tunnel: conv_rows must be 0 to " + std::to_string(kMaxRows));
+  if (m.conv_rows > 0) {
+    m.conv_y0 = p.f("conv_y0");
+    m.conv_dy = p.f("conv_dy");
+    m.conv_dx = p.f("conv_dx");
+    if (!(m.conv_dx > 2.0f * m.radius) || !(m.conv_dy > 2.0f * m.radius))
+      throw Error("wind-tunnel: the inflow conveyor's slots must be more than a diameter apart");
+  }
   m.n_edges = 0;
   m.bbox = Box2{{{1e30f, 1e30f}}, {{-1e30f, -1e30f}}};
   if (arrays && arrays->has("airfoil")) {

@@ -16,6 +16,7 @@ namespace cps::wt {
 constexpr int D = 2;
 constexpr int kMaxEdges = 1024;  // airfoil polygon capacity (edges): e398 has 61, naca4 200
 constexpr int kMaxBlocks = 64;   // block averages of the forces kept in the record
+constexpr int kMaxRows = 4096;   // inflow conveyor rows (the cold beam's lattice rows)
 
 constexpr int kForwardEuler = 0;     // x += v dt, v += a dt (the seed's)
 constexpr int kSymplecticEuler = 1;  // v += a dt, x += v dt
@@ -45,6 +46,11 @@ struct Model {
   double measure_start;  // s: forces are averaged from here on (the steady part)
   double block_time;     // s: initial length of an averaging block (doubled when all are full)
   unsigned seed;         // re-entry random numbers
+  // the cold beam's inflow (stages.h, "The inflow conveyor"): a lattice of slots moving in at
+  // the stream's speed, conv_rows rows dy apart from conv_y0 and columns dx apart; 0 rows:
+  // re-entry at a uniformly random height (a thermal or collisionless gas)
+  int conv_rows;
+  float conv_y0, conv_dy, conv_dx;
   int n_edges;
   Box2 bbox;             // of the airfoil, widened by the radius
   float edges[kEdgeStride * kMaxEdges];  // polygon edge records (polygon.h)
@@ -107,6 +113,13 @@ struct Scene {
   int nblocks;          // full blocks
   double cur_t, cur_lift, cur_drag, cur_moment;  // the block in progress
   double blk_lift[kMaxBlocks], blk_drag[kMaxBlocks], blk_moment[kMaxBlocks];  // block means
+  // the inflow conveyor: how far the stream has moved in since t = 0 (the slots' phase), the
+  // next free column of each row, each row's claim of this step (the smallest id wanting it;
+  // INT_MAX between steps) and this step's leaving particles
+  double inflow_x;
+  long long conv_next[kMaxRows];
+  int conv_claim[kMaxRows];
+  int n_leaving;
 };
 
 // structure of arrays; particles sorted by cell every step
@@ -119,6 +132,7 @@ struct Arrays {
   float* pressure;   // sum of contact-force magnitudes (the seed's "pressure")
   int* contacts;     // overlapping neighbours, walls and airfoil
   StepSums* items;
+  int* leaving;      // this step's leaving particles (slots; -1 once placed on the conveyor)
 };
 
 }  // namespace cps::wt

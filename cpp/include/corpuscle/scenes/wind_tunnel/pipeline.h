@@ -56,7 +56,7 @@ class Pipeline {
   static double bytes_needed(const Model& m) {
     const double n = m.n;
     const double per = 2 * (2 * sizeof(Vec2) + 2 * sizeof(int)) + sizeof(Vec2) + 2 * sizeof(float) + sizeof(int) +
-                       sizeof(StepSums) + 4 * sizeof(uint64_t) + 2 * sizeof(int);
+                       sizeof(StepSums) + 4 * sizeof(uint64_t) + 3 * sizeof(int);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
     return n * per + cells + sizeof(Model);
   }
@@ -81,6 +81,7 @@ class Pipeline {
     ndens_.resize(n);
     contacts_.resize(n);
     items_.resize(n);
+    leaving_.resize(n);
   }
 
   static Scene initial_record(const Model& m) {
@@ -88,11 +89,14 @@ class Pipeline {
     s.clock = start_clock();
     s.sums = s.pending = StepSums::identity();
     s.block_len = m.block_time;
+    for (int r = 0; r < kMaxRows; ++r) s.conv_claim[r] = kNoClaim;
     return s;
   }
   static void restored(Scene& r) {
     r.pending = r.sums;
     r.step_dt = 0.0f;
+    r.n_leaving = 0;
+    for (int k = 0; k < kMaxRows; ++k) r.conv_claim[k] = kNoClaim;  // no claim between steps
   }
 
   long long particles() const { return m_.n; }
@@ -156,10 +160,16 @@ class Pipeline {
     ex_.mark(3);
     if (integrate) {
       // 3. the reductions and the per-scene update
-      ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
+      ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g, u_});
       ex_.mark(4);
       // 4. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n, IntegrateStage{md, g, u_, s});
+      // the cold beam's leaving particles onto the inflow conveyor's free slots
+      if (m_.conv_rows > 0)
+        for (int attempt = 0; attempt < kConveyorAttempts; ++attempt) {
+          if (attempt > 0) ex_.for_each(kConveyorThreads, ConveyorClaimStage{md, g, s, attempt});
+          ex_.for_each(kConveyorThreads, ConveyorPlaceStage{md, g, u_, s, attempt});
+        }
       ex_.mark(5);
     } else {
       ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
@@ -229,6 +239,7 @@ class Pipeline {
     a.pressure = pressure_.data();
     a.contacts = contacts_.data();
     a.items = items_.data();
+    a.leaving = leaving_.data();
     return a;
   }
 
@@ -247,6 +258,7 @@ class Pipeline {
   Buf<float> pressure_;
   Buf<int> contacts_;
   Buf<StepSums> items_;
+  Buf<int> leaving_;  // this step's leaving particles (the inflow conveyor)
   int parity_ = 0;
 };
 

@@ -374,10 +374,12 @@ CPS_HD CPS_INLINE void accumulate_blocks(Scene& G, const StepSums& S, double dt)
 struct FinalizeStage {
   const Model* model;
   Scene* g;
+  const Control* ctl;
   CPS_HD void operator()(int) const {
     const Model& m = *model;
     Scene& G = *g;
     Clock& C = G.clock;
+    G.n_leaving = 0;  // this step's list (filled by the integration)
     if (clock_at_end(C)) {
       G.step_dt = 0.0f;
       return;
@@ -400,6 +402,7 @@ struct FinalizeStage {
     // the forces of this step's state act over [time, time + dt]
     if (C.time >= m.measure_start) accumulate_blocks(G, S, double(dt));
     G.step_dt = dt;
+    G.inflow_x += double(m.speed) * double(1.0f + ctl->speed_scale) * double(dt);  // the conveyor's slots move in
     advance_clock(C, dt, last);
   }
 };
@@ -430,6 +433,106 @@ CPS_HD CPS_INLINE void reenter(const Model& m, const Control& u, int id, long lo
   x = Vec2{{m.lo[0] + in, m.lo[1] + m.radius + u1 * span}};
   v = Vec2{{ux, uy}};
 }
+
+// The inflow conveyor (a cold beam with contacts, m.conv_rows > 0). A particle re-entering at
+// a uniformly random height lands on another one about 4 times the solid fraction of the time
+// (40% at the default 0.1): the overlap's spring energy heats the stream, which then is no
+// longer the cold free stream the initial lattice is. So the free stream enters as the start
+// does, as a lattice: slots in conv_rows rows (dy apart) and columns dx apart moving in at the
+// stream's speed. Slot (r, c) lies at x = lo + inflow_x + phase_r - c dx (plus a fixed jitter,
+// the start lattice's), so the column in the inlet's first dx is
+// c_now = floor((inflow_x + phase_r) / dx), and a row is free while its next column
+// conv_next[r] <= c_now. The slots exceed the flux by the start's 10% vacancies, so a free row
+// is found among a few hashed tries. Two particles may pick one row in a step: the smallest id
+// gets it (atomic min, then a second pass), whatever the threads' order, so every backend
+// places the same particles in the same slots; a particle that finds no free row in
+// kConveyorAttempts rounds of kConveyorTries keeps the random-height entry it was given.
+constexpr int kConveyorTries = 64;
+constexpr int kConveyorAttempts = 2;
+constexpr int kConveyorThreads = 1024;  // the claim and place passes loop over the leaving list
+constexpr int kNoClaim = 0x7fffffff;
+
+// the row's phase: a golden-ratio sequence, so neighbouring rows' columns do not line up
+CPS_HD CPS_INLINE double conveyor_phase(const Model& m, int r) {
+  const double g = double(r) * 0.6180339887498949;
+  return double(m.conv_dx) * (g - floor(g));
+}
+CPS_HD CPS_INLINE long long conveyor_column(const Model& m, double inflow_x, int r) {
+  return (long long)floor((inflow_x + conveyor_phase(m, r)) / double(m.conv_dx));
+}
+// the first of the particle's hashed rows whose inlet slot is free, and that slot; -1: none
+CPS_HD CPS_INLINE int conveyor_row(const Model& m, const Scene& G, int id, long long step, int attempt,
+                                   long long& column) {
+  for (int j = 0; j < kConveyorTries; ++j) {
+    int r = int(uniform01(m.seed, id, step, 1000 + attempt * kConveyorTries + j) * float(m.conv_rows));
+    r = r < m.conv_rows ? r : m.conv_rows - 1;
+    const long long c = conveyor_column(m, G.inflow_x, r);
+    if (G.conv_next[r] <= c) {
+      column = c;
+      return r;
+    }
+  }
+  return -1;
+}
+// the position of slot (r, c): the start lattice's jitter, 0.45 of the gap each way, keeps
+// neighbouring slots more than a diameter apart; never upstream of the inlet
+CPS_HD CPS_INLINE Vec2 conveyor_slot(const Model& m, double inflow_x, int r, long long c) {
+  const float jx = (2.0f * uniform01(m.seed, r, c, 2000) - 1.0f) * 0.45f * (m.conv_dx - 2.0f * m.radius);
+  const float jy = (2.0f * uniform01(m.seed, r, c, 2001) - 1.0f) * 0.45f * (m.conv_dy - 2.0f * m.radius);
+  const double x = double(m.lo[0]) + inflow_x + conveyor_phase(m, r) - double(c) * double(m.conv_dx) + double(jx);
+  return Vec2{{fmax2(float(x), m.lo[0]), m.conv_y0 + float(r) * m.conv_dy + jy}};
+}
+
+// an attempt's claim: the particle's row, if it found a free one (the smallest id wins it)
+CPS_HD CPS_INLINE void conveyor_claim(const Model& m, Scene* g, int id, int attempt) {
+  long long c;
+  const int r = conveyor_row(m, *g, id, g->clock.step, attempt, c);
+  if (r >= 0) atomic_min(&g->conv_claim[r], id);
+}
+// pass 1 of a later attempt: each unplaced leaving particle claims its row (the first
+// attempt's claims are made by the integration)
+struct ConveyorClaimStage {
+  const Model* model;
+  Scene* g;
+  Arrays s;
+  int attempt;
+  CPS_HD void operator()(int t) const {
+    const Model& m = *model;
+    if (!(g->step_dt > 0.0f)) return;
+    const int count = g->n_leaving;
+    for (int k = t; k < count; k += kConveyorThreads) {
+      const int i = s.leaving[k];
+      if (i >= 0) conveyor_claim(m, g, s.id[i], attempt);
+    }
+  }
+};
+// pass 2: the winners take their slots (the rows they claimed are still free: only a winner
+// writes its row), reset the claim, and enter at the stream's velocity
+struct ConveyorPlaceStage {
+  const Model* model;
+  Scene* g;
+  const Control* ctl;
+  Arrays s;
+  int attempt;
+  CPS_HD void operator()(int t) const {
+    const Model& m = *model;
+    if (!(g->step_dt > 0.0f)) return;
+    const int count = g->n_leaving;
+    for (int k = t; k < count; k += kConveyorThreads) {
+      const int i = s.leaving[k];
+      if (i < 0) continue;
+      const int id = s.id[i];
+      long long c;
+      const int r = conveyor_row(m, *g, id, g->clock.step, attempt, c);
+      if (r < 0 || g->conv_claim[r] != id) continue;  // no free row, or a smaller id got it
+      g->conv_claim[r] = kNoClaim;
+      g->conv_next[r] = c + 1;
+      s.pos[i] = conveyor_slot(m, g->inflow_x, r, c);
+      s.vel[i] = Vec2{{m.speed * (1.0f + ctl->speed_scale), 0.0f}};
+      s.leaving[k] = -1;
+    }
+  }
+};
 
 // no particle ends a step inside the airfoil or outside the channel: a centre that got in is
 // put back on the surface (a twentieth of a radius outside, along the signed-distance
@@ -502,6 +605,12 @@ struct IntegrateStage {
       // the step counter is already the next step's: (id, step) is unique
       reenter(m, *ctl, s.id[i], g->clock.step, dt, frac, x, v);
       add_count(&g->recycled, 1);
+      // a cold beam's conveyor may move it to a lattice slot (the passes after this stage);
+      // the first attempt's claim is made here
+      if (m.conv_rows > 0) {
+        s.leaving[atomic_add(&g->n_leaving, 1)] = i;
+        conveyor_claim(m, g, s.id[i], 0);
+      }
     }
     if (keep_out(m, airfoil_frame(m, *ctl), x, v)) add_count(&g->pushouts, 1);
     if (!finite(x[0] + x[1] + v[0] + v[1])) raise_first(&g->clock.bad, kBadParticles);

@@ -35,7 +35,9 @@
   X(block_moment_sum, double, 1, cur_moment, true)                \
   X(blocks_lift, double, kMaxBlocks, blk_lift, true)              \
   X(blocks_drag, double, kMaxBlocks, blk_drag, true)              \
-  X(blocks_moment, double, kMaxBlocks, blk_moment, true)
+  X(blocks_moment, double, kMaxBlocks, blk_moment, true)         \
+  X(inflow_distance, double, 1, inflow_x, true)                   \
+  X(conveyor_next, long long, kMaxRows, conv_next, true)
 
 // X(name, C type, count, member of Control)
 #define CPS_WT_CONTROLS(X)              \
