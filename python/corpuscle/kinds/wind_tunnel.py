@@ -500,8 +500,9 @@ class WindTunnel(Kind):
             # the section (x, y points) extruded along z across the whole (periodic) span
             airfoil["extrude"] = [float(p["channel_lo"][2]), float(p["channel_hi"][2])]
             airfoil["periodic"] = [False, False, True]
+        extra = {"up": "+y"} if self.dim == 3 else {}  # the walls are bottom and top (a view's up), z the span
         return {"container": {"type": "box", "min": list(p["channel_lo"]), "max": list(p["channel_hi"])},
-                "obstacles": [airfoil],
+                "obstacles": [airfoil], **extra,
                 "bodies": [], "particles": sim.n_particles, "particle_radius": sim.info["radius"],
                 "mass": sim.info["mass"], "free_stream": [p["speed"]] + [0.0] * (self.dim - 1),
                 "units": dict(self.units)}
