@@ -24,9 +24,9 @@ from .wind_tunnel import WindTunnel, _channel_room, _one_thermal, keys_3d
 __all__ = ["KIND", "WindTunnel3D", "DEFAULT_PARTICLES", "WIND_TUNNEL_3D_KEYS"]
 
 # CUDA: the 2-D kind's GPU size (2,097,152, radius 0.0027 m at the 0.25 m span); the CPU
-# backends: a size whose default run (4 s, about 4,000 steps) takes well under a minute on 2 cores
+# backends: a size whose default run (10 s, about 10,000 steps) takes under a minute on 2 cores
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 8_192, "serial": 8_192}
-END_TIME = 4.0  # s: the default run (about 4,000 steps at dt_max)
+END_TIME = 10.0  # s: the default run (about 10,000 steps at dt_max)
 SPAN = 0.25  # m: half a chord (the span only needs to exceed the flow's correlation lengths)
 
 WIND_TUNNEL_3D_KEYS = keys_3d(DEFAULT_PARTICLES, END_TIME, SPAN)
