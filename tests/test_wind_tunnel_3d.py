@@ -474,6 +474,12 @@ def test_cli_runs_records_and_renders(tmp_path):
     # the airfoil's grey (OBSTACLE_FILL, shaded) is drawn: pixels with equal channels, brighter than the background
     grey = (np.abs(img[..., 0] - img[..., 1]) < 6) & (np.abs(img[..., 1] - img[..., 2]) < 6) & (img[..., 0] > 120)
     assert grey.sum() > 200
+    # the export: the airfoil as the extruded surface (two caps and a quad per edge)
+    proc = corpuscle("export", out, "--format", "vtk", tmp_path / "vtk", cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    n = len(wt.airfoil_polygon(load_scene("wind-tunnel-3d").values))
+    text = (tmp_path / "vtk" / "obstacle_airfoil.vtu").read_text(errors="replace")
+    assert f'NumberOfPoints="{2 * n}" NumberOfCells="{n + 2}"' in text
 
 
 def test_monotone_cap_triangles_cover_the_section():
