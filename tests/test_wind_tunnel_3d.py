@@ -201,8 +201,9 @@ def test_reference_forces_pressure_contacts_and_density():
         checked += int((ref["contacts"] > 0).sum())
         across += ref["across"]
         foil += ref["airfoil_contacts"]
-        st = sim.state()  # per unit span
+        st = sim.state()  # per unit span, as the core's derived lift and drag
         assert st["lift"] == pytest.approx(fa[1] / 0.2, rel=1e-6) and st["drag"] == pytest.approx(fa[0] / 0.2, rel=1e-6)
+        assert s["lift"] == pytest.approx(st["lift"], rel=1e-6) and s["drag"] == pytest.approx(st["drag"], rel=1e-6)
     assert checked > 400 and across > 5 and foil > 0  # many contacts, some through the periodic boundary
 
 

@@ -355,11 +355,12 @@ class WindTunnel(Kind):
                 raise ValueError(f"checkpoint: {pos.shape[0] if pos.ndim else 0} particles, the scene has {n}")
         rho = n * m / free  # per unit area (2-D) or volume (3-D)
         info = {"radius": radius, "mass": m, "density": rho, "chord": chord, "airfoil": poly, "free_area": free_area,
-                "span": self.span(v), "free_volume": free if d == 3 else None,
                 "speed": float(v["inflow.speed"]), "measure_start": t0,
                 "restitution_pp": restitution(laws["contact"][0], laws["contact"][1], m / 2),
                 "restitution_wall": restitution(laws["wall"][0], laws["wall"][1], m),
                 "restitution_wing": restitution(laws["wing"][0], laws["wing"][1], m)}
+        if d == 3:
+            info.update(span=self.span(v), free_volume=free)  # the free volume's section: free_area
         arrays = {"position": pos, "velocity": vel, "airfoil": np.ascontiguousarray(poly, dtype=np.float32)}
         return Build(params, arrays, info)
 

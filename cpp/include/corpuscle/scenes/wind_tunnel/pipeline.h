@@ -212,11 +212,18 @@ class Pipeline {
     }
   }
 
+  // lift and drag per unit span (D = 3: the whole span's over the span; D = 2: as summed)
   std::vector<std::pair<std::string, double>> derived(const Scene& r) const {
     const float me = effective_mass(m_.mass, m_.mass), mw = effective_mass(m_.mass, 0.0f);
+    double lift = double(r.sums.force[1]), drag = double(r.sums.force[0]);
+    if constexpr (D == 3) {
+      const double span = double(m_.hi[2]) - double(m_.lo[2]);
+      lift /= span;
+      drag /= span;
+    }
     return {{"vmax", std::sqrt(double(r.sums.vmax2))},
-            {"lift", double(r.sums.force[1])},
-            {"drag", double(r.sums.force[0])},
+            {"lift", lift},
+            {"drag", drag},
             {"chosen_dt", double(choose_dt(m_, r.sums.vmax2))},
             {"restitution_pp", double(restitution_from_damping(m_.pp, me))},
             {"restitution_wall", double(restitution_from_damping(m_.wall, mw))},
