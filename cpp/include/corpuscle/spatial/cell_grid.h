@@ -280,6 +280,24 @@ struct CellKeysFn {
   }
 };
 
+// the keys of a sort that keeps the order unless *rebuild: a slot not rekeyed keeps the key the
+// last sort gave it (those are sorted, so the stable sort leaves every slot where it is and the
+// cell ranges come out as they were)
+template <int D>
+struct CellKeysIfFn {
+  CellGridSpec<D> spec;
+  const Vec<D>* pos;
+  const int* tags;
+  const uint64_t* last;  // the last sort's sorted keys
+  const int* rebuild;
+  uint64_t* keys;
+  int* ids;
+  CPS_HD void operator()(int i) const {
+    keys[i] = *rebuild ? spec.key(pos[i], tags ? tags[i] : 0) : last[i];
+    ids[i] = i;
+  }
+};
+
 template <class T>
 struct ReorderFn {
   const int* order;
@@ -325,6 +343,17 @@ class CellGrid {
     grow(ex, ids_, n);
     grow(ex, order_, n);
     ex.for_each(n, CellKeysFn<D>{spec_, pos, tags, keys_.data(), ids_.data()});
+    ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+    sorted_ = true;
+  }
+  // 1'. the same when *rebuild != 0 (read on the device); otherwise every slot keeps its last
+  //     sorted key and the order stands (order() is the identity). The first sort always keys.
+  void sort_if(Exec& ex, const Vec<D>* pos, const int* tags, int n, const int* rebuild) {
+    if (!sorted_ || n != n_) {
+      sort(ex, pos, tags, n);
+      return;
+    }
+    ex.for_each(n, CellKeysIfFn<D>{spec_, pos, tags, keys_sorted_.data(), rebuild, keys_.data(), ids_.data()});
     ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
   }
   // 2. out[j] = in[order()[j]]: an array in sorted order (in and out distinct)
@@ -382,6 +411,7 @@ class CellGrid {
 
   CellGridSpec<D> spec_;
   int n_ = 0;
+  bool sorted_ = false;  // a sort has keyed every slot (sort_if may keep those keys)
   Buffer<uint64_t> keys_, keys_sorted_;
   Buffer<int> ids_, order_;
   Buffer<Vec<D>> sorted_pos_;
