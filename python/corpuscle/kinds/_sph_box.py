@@ -257,6 +257,7 @@ class SphBox(Kind):
                 "p_max": float(s["sums_p_max"]), "mean_neighbors": float(s["mean_neighbors"]),
                 "outside": int(s["outside"]), "outside_max": max(int(s["outside"]), int(s["outside_max"])),
                 "chosen_dt": float(s["chosen_dt"]), "probe_time": float(s["probe_time"]),
+                "rebuilds": int(s["rebuilds"]),
                 "probes": self.probes(sim, s)}
 
     def diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:
