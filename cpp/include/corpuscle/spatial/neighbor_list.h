@@ -172,7 +172,7 @@ struct SlotListView {
   static constexpr int kDim = D;
   const int* nbr = nullptr;     // capacity * stride entries
   const int* counts = nullptr;  // stride entries: the neighbours found (may exceed capacity: overflow)
-  const Vec<D>* pos = nullptr;  // positions, numbered like the list's slots
+  const VecA<D>* pos = nullptr; // positions, numbered like the list's slots (padded: one vector load)
   int n = 0;
   int capacity = 0;
   size_t stride = 0;
@@ -181,7 +181,7 @@ struct SlotListView {
 
   CPS_HD int size() const { return n; }
   CPS_HD bool active(int) const { return true; }
-  CPS_HD const Vec<D>& position(int i) const { return pos[i]; }
+  CPS_HD Vec<D> position(int i) const { return pos[i].vec(); }
   CPS_HD float max_radius() const { return list_radius; }
   CPS_HD SlotListView with_radius(float r) const {
     SlotListView v = *this;
@@ -206,7 +206,7 @@ struct SlotListView {
     for (int k = 0; k < c; ++k, e += stride) {
       const int j = *e;
       if (kPairs && j <= i) continue;
-      Vec<D> d = xi - pos[j];
+      Vec<D> d = xi - pos[j].vec();
       float rr = norm2(d);
       if (rr < r2) visit(j, d, rr);
     }
@@ -283,7 +283,7 @@ class SlotNeighborList {
 
   // the lists over positions `pos` (numbered like the source's slots), queried with radius
   // (at most the list radius)
-  SlotListView<D> view(const Vec<D>* pos, float radius) const {
+  SlotListView<D> view(const VecA<D>* pos, float radius) const {
     if (radius > list_radius_)
       throw Error("neighbour list: a query radius of " + std::to_string(radius) + " exceeds the list radius " +
                   std::to_string(list_radius_));

@@ -147,6 +147,17 @@ struct Scene {
   float probe_w[kMaxProbes];
 };
 
+// what the pair loop reads of a neighbour j besides its position, packed for one vector load
+// each (the same values as the arrays they come from): velocity (3-D; 2-D: the first two) and
+// p / rho^2 in 16 bytes, rho and m / rho in 8
+struct alignas(16) PairVel {
+  float v[3];
+  float pr2;
+};
+struct alignas(8) PairRho {
+  float rho, vol;
+};
+
 // structure of arrays (slots in sorted order; *_alt: the other buffers)
 template <int D>
 struct Arrays {
@@ -156,8 +167,9 @@ struct Arrays {
   float *rhom, *rhom_alt;   // the previous step's density (Verlet)
   int *id, *id_alt;
   float* prs;        // pressure of the sorted state (from rho by Tait)
-  float* pr2;        // p / rho^2 of the sorted state (the pressure term's per-particle factor)
-  float* vol;        // m / rho of the sorted state (the density diffusion's V_j)
+  PairVel* pv;       // the pair loop's velocity and p / rho^2 of the sorted state
+  PairRho* pr;       // the pair loop's rho and m / rho (the density diffusion's V_j)
+  VecA<D>* pos4;     // the sorted positions padded for one vector load (the lists' walk)
   Vec<D>* x_build;   // `lists`: positions at the last build (sorted slots; null for other indexes)
   Vec<D>* acc;       // dv/dt (fluid; zero for walls)
   float* drho;       // drho/dt

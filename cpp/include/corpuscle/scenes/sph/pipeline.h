@@ -96,7 +96,8 @@ class Pipeline {
 
   static double bytes_needed(const ModelT& m) {
     const double n = double(m.n_fluid) + double(m.n_wall);
-    const double per = 2 * (3 * sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int)) + 3 * sizeof(float) + sizeof(Vec<D>) +
+    const double per = 2 * (3 * sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int)) + sizeof(float) + sizeof(Vec<D>) +
+                       sizeof(PairVel) + sizeof(PairRho) + sizeof(VecA<D>) +
                        sizeof(float) + sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
                        (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
@@ -122,8 +123,9 @@ class Pipeline {
       id_[p].resize(n_);
     }
     prs_.resize(n_);
-    pr2_.resize(n_);
-    vol_.resize(n_);
+    pv_.resize(n_);
+    pr_.resize(n_);
+    pos4_.resize(n_);
     if constexpr (kLists) {
       if (!(m.list_radius >= m.h) || !(m.rebuild_disp2 >= 0.0f) || m.max_neighbors < 1)
         throw Error(std::string(kind) + ": lists need list_radius >= h, rebuild_distance >= 0 and max_neighbors >= 1");
@@ -227,7 +229,7 @@ class Pipeline {
     InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
     if constexpr (kLists) {
       using Fn = ListGatherFn<SlotListView<D>, InteractStage<D>>;
-      const SlotListView<D> lv = lists_.view(s.pos, m_.h);
+      const SlotListView<D> lv = lists_.view(s.pos4, m_.h);
       ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, Fn{lv, st, 0});
       if (n_ > nf_) ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
     } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
@@ -342,8 +344,9 @@ class Pipeline {
     a.id = id_[cur].data();
     a.id_alt = id_[nxt].data();
     a.prs = prs_.data();
-    a.pr2 = pr2_.data();
-    a.vol = vol_.data();
+    a.pv = pv_.data();
+    a.pr = pr_.data();
+    a.pos4 = pos4_.data();
     a.x_build = kLists ? x_build_.data() : nullptr;
     a.acc = acc_.data();
     a.drho = drho_.data();
@@ -361,7 +364,10 @@ class Pipeline {
   Buf<Vec<D>> pos_[2], vel_[2], velm_[2];
   Buf<float> rho_[2], rhom_[2];
   Buf<int> id_[2];
-  Buf<float> prs_, pr2_, vol_, drho_;
+  Buf<float> prs_, drho_;
+  Buf<PairVel> pv_;
+  Buf<PairRho> pr_;
+  Buf<VecA<D>> pos4_;
   Buf<Vec<D>> x_build_;
   SlotNeighborList<D, Exec> lists_;
   bool relist_ = false;

@@ -38,8 +38,13 @@ struct ReorderStage {
     a.id_alt[j] = a.id[o];
     const float p = tait_pressure(*model, rho);
     a.prs[j] = p;
-    a.pr2[j] = p / (rho * rho);
-    a.vol[j] = model->mass / rho;
+    const Vec<D> v = a.vel[o];
+    PairVel pv;
+    for (int k = 0; k < 3; ++k) pv.v[k] = k < D ? v[k] : 0.0f;
+    pv.pr2 = p / (rho * rho);
+    a.pv[j] = pv;
+    a.pr[j] = PairRho{rho, model->mass / rho};
+    a.pos4[j] = VecA<D>::of(x);
     if (rebuild && *rebuild) a.x_build[j] = x;
   }
 };
@@ -98,7 +103,7 @@ struct InteractStage {
     s.nbrs = 0;
     s.vel_i = a.vel[i];
     s.rho_i = a.rho[i];
-    s.pr2_i = a.pr2[i];
+    s.pr2_i = a.pv[i].pr2;
     return s;
   }
 
@@ -109,16 +114,19 @@ struct InteractStage {
     if (!fi && !fj) return;
     const float r = fsqrt_fast(r2);
     const Vec<D> gw = m.kern.grad(d, r);
-    const Vec<D> dv = s.vel_i - a.vel[j];
+    const PairVel pv = a.pv[j];  // (one vector load each)
+    Vec<D> dv;
+    for (int k = 0; k < D; ++k) dv[k] = s.vel_i[k] - pv.v[k];
     s.drho += m.mass * dot(dv, gw);
     if (!fi) return;
     s.nbrs += 1;
-    const float rho_i = s.rho_i, rho_j = a.rho[j];
+    const PairRho pr = a.pr[j];
+    const float rho_i = s.rho_i, rho_j = pr.rho;
     const float mu = sph_mu<D>(m.hs, m.av.eta2, d, dv, r2);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, r2, rho_i, rho_j, a.vol[j], gw);
+    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, r2, rho_i, rho_j, pr.vol, gw);
     // p_i / rho_i^2 + p_j / rho_j^2 (each computed once per particle, in the reorder)
-    const float pterm = s.pr2_i + a.pr2[j];
+    const float pterm = s.pr2_i + pv.pr2;
     s.acc -= gw * (m.mass * pterm);
     if (m.viscosity == kArtificialViscosity)
       s.acc += artificial_viscosity_acc<D>(m.av, d, dv, r2, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
