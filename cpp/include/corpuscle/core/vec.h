@@ -35,6 +35,21 @@ struct alignas(D == 3 ? 16 : 8) VecA {
     for (int k = 0; k < D; ++k) x.v[k] = v[k];
     return x;
   }
+  // *p as a Vec<D>, read with one vector load on the device (a plain read of three floats
+  // would be split into three)
+  CPS_HD static Vec<D> load(const VecA* p) {
+#ifdef __CUDA_ARCH__
+    if constexpr (D == 3) {
+      const float4 q = *reinterpret_cast<const float4*>(p);
+      return Vec<D>{{q.x, q.y, q.z}};
+    } else {
+      const float2 q = *reinterpret_cast<const float2*>(p);
+      return Vec<D>{{q.x, q.y}};
+    }
+#else
+    return p->vec();
+#endif
+  }
 };
 
 // element-wise arithmetic

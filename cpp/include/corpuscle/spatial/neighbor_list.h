@@ -181,7 +181,7 @@ struct SlotListView {
 
   CPS_HD int size() const { return n; }
   CPS_HD bool active(int) const { return true; }
-  CPS_HD Vec<D> position(int i) const { return pos[i].vec(); }
+  CPS_HD Vec<D> position(int i) const { return VecA<D>::load(pos + i); }
   CPS_HD float max_radius() const { return list_radius; }
   CPS_HD SlotListView with_radius(float r) const {
     SlotListView v = *this;
@@ -206,7 +206,7 @@ struct SlotListView {
     for (int k = 0; k < c; ++k, e += stride) {
       const int j = *e;
       if (kPairs && j <= i) continue;
-      Vec<D> d = xi - pos[j].vec();
+      Vec<D> d = xi - VecA<D>::load(pos + j);
       float rr = norm2(d);
       if (rr < r2) visit(j, d, rr);
     }

@@ -68,13 +68,18 @@ template <int D>
 struct PairConsts {
   SphKernel<D> kern;  // the gradient kernel
   float mass, hs, c0;
+  float eta2;  // 0.01 hs^2: the eta^2 of every pair term (mu_ij, both viscosities, the diffusion)
   int viscosity;
   ArtificialViscosity av;
   LaminarViscosity lv;
   DensityDiffusion dd;
   Vec<D> gravity;
   static PairConsts make(const Model<D>& m) {
-    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.viscosity, m.av, m.lv, m.dd, m.gravity};
+    // the terms were made from the same hs with the same expression (0.01f * hs * hs)
+    if (m.av.eta2 != m.lv.eta2 || (m.dd.kind != DensityDiffusionKind::None && m.dd.eta2 != m.av.eta2) ||
+        m.av.hs != m.hs)
+      throw Error("sph: the pair terms' eta^2 or hs differ");
+    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.av.eta2, m.viscosity, m.av, m.lv, m.dd, m.gravity};
   }
 };
 
@@ -122,16 +127,20 @@ struct InteractStage {
     s.nbrs += 1;
     const PairRho pr = a.pr[j];
     const float rho_i = s.rho_i, rho_j = pr.rho;
-    const float mu = sph_mu<D>(m.hs, m.av.eta2, d, dv, r2);
+    // r^2 + eta^2 and v_ij . r_ij, once for every term (each term's eta^2 is the same 0.01 hs^2,
+    // PairConsts::make: so this is the value each would compute)
+    const float den = r2 + m.eta2;
+    const float vr = dot(dv, d);
+    const float mu = sph_mu_den(m.hs, vr, den);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, r2, rho_i, rho_j, pr.vol, gw);
+    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, den, rho_i, rho_j, pr.vol, gw);
     // p_i / rho_i^2 + p_j / rho_j^2 (each computed once per particle, in the reorder)
     const float pterm = s.pr2_i + pv.pr2;
     s.acc -= gw * (m.mass * pterm);
     if (m.viscosity == kArtificialViscosity)
-      s.acc += artificial_viscosity_acc<D>(m.av, d, dv, r2, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
+      s.acc += artificial_viscosity_acc_mu<D>(m.av, vr, mu, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
     else
-      s.acc += laminar_viscosity_acc<D>(m.lv, d, dv, r2, rho_i, rho_j, m.mass, gw);
+      s.acc += laminar_viscosity_acc_den<D>(m.lv, d, dv, den, rho_i, rho_j, m.mass, gw);
   }
 
   CPS_HD void end(int i, Acc& s) const {
