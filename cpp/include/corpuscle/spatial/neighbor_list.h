@@ -198,17 +198,33 @@ struct SlotListView {
   CPS_HD void pairs(int i, const Vec<D>& xi, Visit&& visit) const {
     walk<true>(i, xi, visit);
   }
-  // the listed entries in the order the build found them, within the query radius now
+  // the listed entries in the order the build found them, within the query radius now. Written
+  // as "find the next entry within the radius, then visit it": on a device the lanes of a warp
+  // search their lists apart (a few instructions an entry) and run the visitor together, so an
+  // entry past the radius costs a lane the search only, not an idle pass through the visitor
   template <bool kPairs, class Visit>
   CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit) const {
     const int c = count(i);
     const int* e = nbr + i;
-    for (int k = 0; k < c; ++k, e += stride) {
-      const int j = *e;
-      if (kPairs && j <= i) continue;
-      Vec<D> d = xi - VecA<D>::load(pos + j);
-      float rr = norm2(d);
-      if (rr < r2) visit(j, d, rr);
+    int k = 0;
+    for (;;) {
+      int j = -1;
+      Vec<D> d;
+      float rr = 0.0f;
+      while (k < c) {
+        const int jj = *e;
+        ++k;
+        e += stride;
+        if (kPairs && jj <= i) continue;
+        d = xi - VecA<D>::load(pos + jj);
+        rr = norm2(d);
+        if (rr < r2) {
+          j = jj;
+          break;
+        }
+      }
+      if (j < 0) return;
+      visit(j, d, rr);
     }
   }
 };
