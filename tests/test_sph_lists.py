@@ -60,17 +60,19 @@ def test_skin_zero_is_grid_bit_for_bit(kind):
 
 
 @pytest.mark.parametrize("kind", list(KINDS))
-def test_lists_give_grids_pair_sums(kind):
+def test_lists_give_grids_and_allpairs_pair_sums(kind):
     g = stirred_by_id(small(kind, neighbors="grid"))
+    ap = stirred_by_id(small(kind, neighbors="allpairs"))
     lst = stirred_by_id(small(kind, neighbors="lists", sph__skin=0.15))
-    for s in (g, lst):
+    for s in (g, ap, lst):
         s.evaluate()
     assert lst.state()["mean_neighbors"] == g.state()["mean_neighbors"]  # the same pairs within h
-    for name in ("acceleration", "density_rate"):
-        a, b = by_id(g, name), by_id(lst, name)
-        scale = np.abs(a).max()
-        assert scale > 0
-        np.testing.assert_allclose(b, a, rtol=0, atol=2e-5 * scale, err_msg=name)
+    for ref in (g, ap):
+        for name in ("acceleration", "density_rate"):
+            a, b = by_id(ref, name), by_id(lst, name)
+            scale = np.abs(a).max()
+            assert scale > 0
+            np.testing.assert_allclose(b, a, rtol=0, atol=2e-5 * scale, err_msg=name)
     # the walls' densities feel the same fluid
     np.testing.assert_array_equal(by_id(g, "position"), by_id(lst, "position"))
 
