@@ -1,6 +1,6 @@
 """The fluid-box sweep of issue 9 (seed 002's tables): particles in powers of 4 from 128
 (to 4,194,304 on the GPU) x {serial allpairs, serial grid, OpenMP grid, CUDA allpairs, CUDA
-grid, CUDA compact}, through `corpuscle bench --json`, with the mean neighbour count and the
+grid, CUDA compact, CUDA lists}, through `corpuscle bench --json`, with the mean neighbour count and the
 per-stage times (CUDA events) beside every figure; then the seed's speedup tables (over
 serial and over OpenMP) and a PNG plot. All-pairs rows stop where one step would take longer
 than --max-step seconds (O(N^2)).
@@ -21,7 +21,7 @@ import subprocess
 import sys
 
 CONFIGS = [("serial", "allpairs"), ("serial", "grid"), ("cpu", "grid"),
-           ("cuda", "allpairs"), ("cuda", "grid"), ("cuda", "compact")]
+           ("cuda", "allpairs"), ("cuda", "grid"), ("cuda", "compact"), ("cuda", "lists")]
 
 
 def bench(scene, backend, index, n, steps, repeats, out, extra):

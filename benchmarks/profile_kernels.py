@@ -15,6 +15,8 @@ ap.add_argument("case", choices=["batch", "magic8ball", "wind-tunnel", "fluid-bo
 ap.add_argument("--steps", type=int, default=5)
 ap.add_argument("--warmup", type=int, default=30)
 ap.add_argument("--profile", action="store_true", help="print the core's stage profile instead")
+ap.add_argument("--neighbors", default=None, help="fluid-box: the neighbour index (default: the kind's)")
+ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="fluid-box: a scene override")
 args = ap.parse_args()
 
 from corpuscle import Batch, Simulation  # noqa: E402
@@ -26,7 +28,9 @@ elif args.case == "magic8ball":
 elif args.case == "wind-tunnel":
     sim = Simulation.from_scene("wind-tunnel", backend="cuda")
 else:
-    sim = Simulation.from_scene("fluid-box", backend="cuda", particles=131072)
+    over = {k: float(v) for k, v in (t.split("=", 1) for t in args.set)}
+    sim = Simulation.from_scene("fluid-box", backend="cuda", particles=131072, neighbors=args.neighbors,
+                                overrides=over or None)
 sim.core.set_end_time(1e30)
 sim.step(args.warmup)
 if args.profile:

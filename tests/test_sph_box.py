@@ -59,10 +59,10 @@ def fields(sim):
     return f
 
 
-def test_registered_with_three_indexes():
+def test_registered_with_four_indexes():
     k = dict(_core.kinds())
     for name in KINDS:
-        assert k[name] == list(INDEXES)
+        assert k[name] == list(INDEXES) + ["lists"]
 
 
 @pytest.mark.parametrize("kind", list(KINDS))

@@ -1155,6 +1155,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             state = sim.state() if batch is None and hasattr(sim, "state") else {}
             if "mean_neighbors" in state:
                 row["mean_neighbors"] = float(state["mean_neighbors"])
+            if "rebuilds" in state and getattr(sim, "neighbors", None) == "lists":
+                # the relistings of the lists index over every step taken (warm-up included)
+                row["rebuilds"] = int(state["rebuilds"])
+                row["steps_taken"] = int(state["step"])
             if batch is None and "n_wall" in (getattr(sim, "info", None) or {}):
                 row["wall_particles"] = int(sim.info["n_wall"])
             if (backend == "cuda" or args.stages) and batch is None:

@@ -95,6 +95,12 @@ struct CpuExec {
     for (int i = 0; i < n; ++i) f(i);
   }
 
+  // for_each (CUDA: with launch bounds of kMinBlocks blocks per multiprocessor)
+  template <int kMinBlocks, class F>
+  void for_each_bounded(int n, const F& f) const {
+    for_each(n, f);
+  }
+
   // parallel_for of a functor f(i, lanes) written for cooperating lanes: one lane per item
   template <class F>
   void for_each_lanes(int n, const F& f) const {

@@ -26,6 +26,14 @@ __global__ void k_for_each(int n, F f) {
   if (i < n) f(i);
 }
 
+// the same with launch bounds: kThreads a block and at least kMinBlocks blocks resident per
+// multiprocessor (the compiler keeps the registers a thread uses within that)
+template <int kThreads, int kMinBlocks, class F>
+__global__ void __launch_bounds__(kThreads, kMinBlocks) k_for_each_bounded(int n, F f) {
+  int i = int(blockIdx.x) * int(blockDim.x) + int(threadIdx.x);
+  if (i < n) f(i);
+}
+
 // a warp per item: functor f(i, WarpLanes)
 template <class F>
 __global__ void k_for_each_warp(int n, F f) {
@@ -285,6 +293,16 @@ struct CudaExec {
     activate();
     if (n <= 0) return;
     k_for_each<<<(n + kBlock - 1) / kBlock, kBlock, 0, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // for_each with kMinBlocks blocks of kBlock threads resident per multiprocessor (a heavy
+  // stage whose registers would otherwise limit its occupancy)
+  template <int kMinBlocks, class F>
+  void for_each_bounded(int n, const F& f) {
+    activate();
+    if (n <= 0) return;
+    k_for_each_bounded<kBlock, kMinBlocks><<<(n + kBlock - 1) / kBlock, kBlock, 0, stream_>>>(n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 

@@ -33,7 +33,8 @@ KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
 VISCOSITIES = {"artificial": 0, "laminar": 1}
 DIFFUSIONS = {"none": 0, "molteni": 1, "fourtakas": 2}
 INTEGRATORS = {"verlet": 0, "symplectic-euler": 1}
-UNSTABLE_REASONS = {1: "a density, velocity or position became non-finite (NaN/inf)"}
+UNSTABLE_REASONS = {1: "a density, velocity or position became non-finite (NaN/inf)",
+                    2: "the neighbour lists overflowed and could not grow (not enough memory)"}
 
 _K = KeySpec
 
@@ -69,6 +70,9 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
         "sph.diffusion": _K("enum", "fourtakas", "", doc="density diffusion: none, molteni (Molteni & Colagrossi "
                             "2009) or fourtakas (Fourtakas et al. 2019, DualSPHysics's DDT2)", choices=tuple(DIFFUSIONS)),
         "sph.delta": _K("float", 0.1, "", 0.0, 1.0, "density diffusion coefficient delta"),
+        "sph.skin": _K("float", 0.1, "h", 0.0, 1.0,
+                       "--neighbors lists: the lists reach h (1 + skin), h the kernel support, and are reused "
+                       "until a particle has moved skin h / 2; 0 relists every step"),
         "timestep.cfl": _K("float", 0.2, "", 0.0, 1.0, "CFL number of the time step (DualSPHysics: 0.2)", lo_open=True),
         "timestep.dt_min": _K("float", 1e-9, "s", 0.0, 1.0, "smallest time step", lo_open=True),
         "timestep.dt_max": _K("float", 1e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),
@@ -186,6 +190,15 @@ class SphBox(Kind):
             "domain_lo": (-(layers + 1) * dp * np.ones(D)).tolist(), "domain_hi": (box_hi + (layers + 1) * dp).tolist(),
             "probes": [float(x) for p in probes for x in p],
         }
+        # --neighbors lists: slot lists within h (1 + skin), rebuilt once a particle has moved
+        # skin h / 2; capacity 1.3 times the count within that reach at the lattice spacing
+        # (the fluid compresses ~1%), plus 32 (a list that still overflows grows)
+        skin = float(v["sph.skin"]) if target.index == "lists" else 0.0
+        reach = h * (1.0 + skin) / dp
+        mean = 4.0 / 3.0 * math.pi * reach ** 3 if D == 3 else math.pi * reach ** 2
+        params["list_radius"] = h * (1.0 + skin)
+        params["rebuild_distance"] = 0.5 * skin * h * (1.0 - 1e-5)  # (a margin for the float distances)
+        params["max_neighbors"] = int(math.ceil((1.3 * mean + 32) / 32.0)) * 32 if target.index == "lists" else 1
         check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
                      f"{nf_est + box_cells} particles")
         # the walls: every lattice point of the box widened by `layers` that is not inside it
@@ -244,6 +257,7 @@ class SphBox(Kind):
                 "p_max": float(s["sums_p_max"]), "mean_neighbors": float(s["mean_neighbors"]),
                 "outside": int(s["outside"]), "outside_max": max(int(s["outside"]), int(s["outside_max"])),
                 "chosen_dt": float(s["chosen_dt"]), "probe_time": float(s["probe_time"]),
+                "rebuilds": int(s["rebuilds"]),
                 "probes": self.probes(sim, s)}
 
     def diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:

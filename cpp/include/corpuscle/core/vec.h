@@ -19,6 +19,39 @@ struct Vec {
 using Vec2 = Vec<2>;
 using Vec3 = Vec<3>;
 
+// a Vec<D> padded to 8 (2-D) or 16 (3-D: the fourth float unused) bytes and aligned to that, so
+// a device thread loads it with one vector instruction (a gather of neighbours' positions)
+template <int D>
+struct alignas(D == 3 ? 16 : 8) VecA {
+  float v[D == 3 ? 4 : 2];
+  CPS_HD static VecA of(const Vec<D>& x) {
+    VecA a;
+    for (int k = 0; k < D; ++k) a.v[k] = x.v[k];
+    if constexpr (D == 3) a.v[3] = 0.0f;
+    return a;
+  }
+  CPS_HD Vec<D> vec() const {
+    Vec<D> x;
+    for (int k = 0; k < D; ++k) x.v[k] = v[k];
+    return x;
+  }
+  // *p as a Vec<D>, read with one vector load on the device (a plain read of three floats
+  // would be split into three)
+  CPS_HD static Vec<D> load(const VecA* p) {
+#ifdef __CUDA_ARCH__
+    if constexpr (D == 3) {
+      const float4 q = *reinterpret_cast<const float4*>(p);
+      return Vec<D>{{q.x, q.y, q.z}};
+    } else {
+      const float2 q = *reinterpret_cast<const float2*>(p);
+      return Vec<D>{{q.x, q.y}};
+    }
+#else
+    return p->vec();
+#endif
+  }
+};
+
 // element-wise arithmetic
 template <int D> CPS_HD CPS_INLINE Vec<D> operator+(Vec<D> a, const Vec<D>& b) {
   for (int k = 0; k < D; ++k) a.v[k] += b.v[k];

@@ -32,6 +32,9 @@
 // for q < 1/2, WendlandC2), so grad W(0) = 0 exactly and nothing blows up near r = 0; Spiky and
 // Viscosity return zero at r = 0 (the self pair).
 //
+// The gradients' divisions are fdiv_fast (core/hd.h): exact on the host, the hardware's
+// approximate division on the device (the pair loop's cost).
+//
 // Compile-time selection: Kernel<D, SphKernelKind::WendlandC2>::make(h). Run-time selection
 // (a kind code in a POD, usable in device code): SphKernel<D>::make(kind, h), whose switch calls
 // the same static functions. Each typed kernel stores only {h, h2, c, gc}, with c the
@@ -107,7 +110,7 @@ struct KernelFormula<D, SphKernelKind::Spiky> {
   CPS_HD static Vec<D> grad(const SphKernelConsts& k, const Vec<D>& d, float r) {
     if (r >= k.h || r <= 0.0f) return Vec<D>::zero();
     float t = k.h - r;
-    return d * (-k.gc * t * t / r);
+    return d * fdiv_fast(-k.gc * t * t, r);
   }
 };
 
@@ -154,9 +157,9 @@ struct KernelFormula<D, SphKernelKind::Viscosity> {
     if (r >= k.h || r <= 0.0f) return Vec<D>::zero();
     float h = k.h, t = h - r;
     if constexpr (D == 3) {
-      return d * (-k.c * t * t * (k.h2 + 2.0f * h * r + 3.0f * r * r) / (2.0f * k.h2 * h * r * r * r));
+      return d * fdiv_fast(-k.c * t * t * (k.h2 + 2.0f * h * r + 3.0f * r * r), 2.0f * k.h2 * h * r * r * r);
     } else {
-      return d * (-k.c * t * t * (h + 2.0f * r) / (6.0f * r * r));
+      return d * fdiv_fast(-k.c * t * t * (h + 2.0f * r), 6.0f * r * r);
     }
   }
   // lap W = gc (h - r), as SphKernels<D>::visc_lap
@@ -184,11 +187,11 @@ struct KernelFormula<D, SphKernelKind::CubicSpline> {
   }
   // grad W = c / h^2 (f'(q) / q) d: f'/q = 18 q - 12 (q < 1/2), -6 (1 - q)^2 / q (q >= 1/2)
   CPS_HD static Vec<D> grad(const SphKernelConsts& k, const Vec<D>& d, float r) {
-    float q = r / k.h;
+    float q = fdiv_fast(r, k.h);
     if (q >= 1.0f) return Vec<D>::zero();
     if (q < 0.5f) return d * (k.gc * (18.0f * q - 12.0f));
     float t = 1.0f - q;
-    return d * (-6.0f * k.gc * t * t / q);
+    return d * fdiv_fast(-6.0f * k.gc * t * t, q);
   }
 };
 
@@ -212,7 +215,7 @@ struct KernelFormula<D, SphKernelKind::WendlandC2> {
   }
   // dW/dr = -20 c q (1 - q)^3 / h, so grad W = -20 c / h^2 (1 - q)^3 d
   CPS_HD static Vec<D> grad(const SphKernelConsts& k, const Vec<D>& d, float r) {
-    float q = r / k.h;
+    float q = fdiv_fast(r, k.h);
     if (q >= 1.0f) return Vec<D>::zero();
     float t = 1.0f - q;
     return d * (k.gc * t * t * t);

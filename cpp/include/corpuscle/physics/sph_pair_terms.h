@@ -16,6 +16,9 @@
 //     scalar factors are symmetric in (i, j) and multiply an antisymmetric vector;
 //   - the density diffusion gives V_i D_ij = -V_j D_ji (V = m / rho), so sum_i V_i drho_i/dt
 //     = 0: the hydrostatic correction is taken as an odd function of z_ij (see below).
+//
+// Divisions and powers here are fdiv_fast / fpow_fast (core/hd.h): the host evaluates them
+// exactly as written, the device with its approximate instructions (the pair loop's cost).
 #pragma once
 #include "corpuscle/core/vec.h"
 
@@ -23,9 +26,11 @@ namespace cps {
 
 // mu_ij = hs v_ij . r_ij / (r_ij^2 + eta^2) (Monaghan 1992, section 4); |mu_ij| is also the
 // pair's speed in the DualSPHysics CFL limit dt_cv (physics/timestep.h, choose_dt_cfl)
+// (den = r^2 + eta^2 and vr = v_ij . r_ij given: what a pair loop computes once for every term)
+CPS_HD CPS_INLINE float sph_mu_den(float hs, float vr, float den) { return fdiv_fast(hs * vr, den); }
 template <int D>
 CPS_HD CPS_INLINE float sph_mu(float hs, float eta2, const Vec<D>& d, const Vec<D>& dv, float r2) {
-  return hs * dot(dv, d) / (r2 + eta2);
+  return sph_mu_den(hs, dot(dv, d), r2 + eta2);
 }
 
 // ---- Monaghan artificial viscosity (Monaghan 1992, section 4; Monaghan & Gingold 1983) ----
@@ -41,15 +46,26 @@ struct ArtificialViscosity {
   }
 };
 
+// with vr = v_ij . r_ij and mu = mu_ij given (sph_mu_den with p.hs and r^2 + p.eta2)
+CPS_HD CPS_INLINE float monaghan_pi_mu(const ArtificialViscosity& p, float vr, float mu, float c_bar, float rho_bar) {
+  if (vr >= 0.0f) return 0.0f;  // receding (or sliding past): no viscosity
+  return fdiv_fast(-p.alpha * c_bar * mu + p.beta * mu * mu, rho_bar);
+}
 template <int D>
 CPS_HD CPS_INLINE float monaghan_pi(const ArtificialViscosity& p, const Vec<D>& d, const Vec<D>& dv, float r2,
                                     float c_bar, float rho_bar) {
   float vr = dot(dv, d);
-  if (vr >= 0.0f) return 0.0f;  // receding (or sliding past): no viscosity
-  float mu = p.hs * vr / (r2 + p.eta2);
-  return (-p.alpha * c_bar * mu + p.beta * mu * mu) / rho_bar;
+  if (vr >= 0.0f) return 0.0f;
+  return monaghan_pi_mu(p, vr, sph_mu_den(p.hs, vr, r2 + p.eta2), c_bar, rho_bar);
 }
 
+template <int D>
+CPS_HD CPS_INLINE Vec<D> artificial_viscosity_acc_mu(const ArtificialViscosity& p, float vr, float mu, float c_i,
+                                                     float c_j, float rho_i, float rho_j, float m_j,
+                                                     const Vec<D>& gradW) {
+  float pi = monaghan_pi_mu(p, vr, mu, 0.5f * (c_i + c_j), 0.5f * (rho_i + rho_j));
+  return gradW * (-m_j * pi);
+}
 template <int D>
 CPS_HD CPS_INLINE Vec<D> artificial_viscosity_acc(const ArtificialViscosity& p, const Vec<D>& d, const Vec<D>& dv,
                                                   float r2, float c_i, float c_j, float rho_i, float rho_j,
@@ -69,11 +85,18 @@ struct LaminarViscosity {
   CPS_HD static LaminarViscosity make(float nu0, float hs) { return LaminarViscosity{nu0, 0.01f * hs * hs}; }
 };
 
+// with den = r^2 + p.eta2 given
+template <int D>
+CPS_HD CPS_INLINE Vec<D> laminar_viscosity_acc_den(const LaminarViscosity& p, const Vec<D>& d, const Vec<D>& dv,
+                                                   float den, float rho_i, float rho_j, float m_j,
+                                                   const Vec<D>& gradW) {
+  float s = fdiv_fast(m_j * 4.0f * p.nu0 * dot(d, gradW), (rho_i + rho_j) * den);
+  return dv * s;
+}
 template <int D>
 CPS_HD CPS_INLINE Vec<D> laminar_viscosity_acc(const LaminarViscosity& p, const Vec<D>& d, const Vec<D>& dv,
                                                float r2, float rho_i, float rho_j, float m_j, const Vec<D>& gradW) {
-  float s = m_j * 4.0f * p.nu0 * dot(d, gradW) / ((rho_i + rho_j) * (r2 + p.eta2));
-  return dv * s;
+  return laminar_viscosity_acc_den<D>(p, d, dv, r2 + p.eta2, rho_i, rho_j, m_j, gradW);
 }
 
 // ---- density diffusion (delta-SPH) ----
@@ -117,19 +140,27 @@ CPS_HD CPS_INLINE float fourtakas_rho_h_published(const DensityDiffusion& p, flo
 }
 // its odd part, the one used: rho0 / 2 ((1 + kz z)^(1/gamma) - (1 - kz z)^(1/gamma))
 CPS_HD CPS_INLINE float fourtakas_rho_h(const DensityDiffusion& p, float z_ij) {
-  float up = fpow(fmax2(1.0f + p.kz * z_ij, 0.0f), p.gamma_inv);
-  float dn = fpow(fmax2(1.0f - p.kz * z_ij, 0.0f), p.gamma_inv);
+  float up = fpow_fast(fmax2(1.0f + p.kz * z_ij, 0.0f), p.gamma_inv);
+  float dn = fpow_fast(fmax2(1.0f - p.kz * z_ij, 0.0f), p.gamma_inv);
   return 0.5f * p.rho0 * (up - dn);
+}
+
+// with den = r^2 + p.eta2 and V_j = m_j / rho_j given (what a pair loop has at hand)
+template <int D>
+CPS_HD CPS_INLINE float density_diffusion_rate_v(const DensityDiffusion& p, const Vec<D>& d, float den, float rho_i,
+                                                 float rho_j, float vol_j, const Vec<D>& gradW) {
+  if (p.kind == DensityDiffusionKind::None) return 0.0f;
+  float drho = rho_j - rho_i;
+  if (p.kind == DensityDiffusionKind::Fourtakas) drho -= fourtakas_rho_h(p, d[D - 1]);
+  // r_ji . grad_i W_ij = -d . gradW >= 0
+  return fdiv_fast(p.coeff * drho * (-dot(d, gradW)), den) * vol_j;
 }
 
 template <int D>
 CPS_HD CPS_INLINE float density_diffusion_rate(const DensityDiffusion& p, const Vec<D>& d, float r2, float rho_i,
                                                float rho_j, float m_j, const Vec<D>& gradW) {
   if (p.kind == DensityDiffusionKind::None) return 0.0f;
-  float drho = rho_j - rho_i;
-  if (p.kind == DensityDiffusionKind::Fourtakas) drho -= fourtakas_rho_h(p, d[D - 1]);
-  // r_ji . grad_i W_ij = -d . gradW >= 0
-  return p.coeff * drho * (-dot(d, gradW)) / (r2 + p.eta2) * (m_j / rho_j);
+  return density_diffusion_rate_v<D>(p, d, r2 + p.eta2, rho_i, rho_j, m_j / rho_j, gradW);
 }
 
 }  // namespace cps

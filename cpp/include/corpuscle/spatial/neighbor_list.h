@@ -9,9 +9,21 @@
 // overflows and a build never stops. The list radius may exceed the radius the stages use
 // (a skin): the view's gather checks the distance against its own radius with the positions
 // it is given (which may have moved since the build, by less than half the skin).
+//
+// Slot lists (SlotNeighborList, below) are the fixed-capacity form for a pair stage run one
+// thread per particle on a device: entry k of slot i is stored at nbr[k * stride + i], so the
+// threads of a warp (consecutive slots) read their k-th entries in one coalesced transaction,
+// and every lane of the pair loop evaluates a listed neighbour instead of a cell's candidate.
+// A build is one pass (no count pass, no host read-back, so it can run inside a captured CUDA
+// graph and be skipped by a device flag): a slot with more neighbours than the capacity stores
+// the first `capacity`, counts them all and raises an overflow code; the host then grows the
+// capacity to the largest count and repeats the step (the engine's fixed-capacity rule).
 #pragma once
+#include <algorithm>
 #include <string>
+#include <vector>
 
+#include "corpuscle/core/atomics.h"
 #include "corpuscle/core/error.h"
 #include "corpuscle/spatial/index.h"
 
@@ -151,6 +163,179 @@ class NeighborList {
   Buffer<int> counts_;
   Buffer<int64_t> offsets_;
   Buffer<int> nbr_;
+};
+
+// ---- slot lists: fixed capacity, entry k of slot i at nbr[k * stride + i] ----
+
+template <int D>
+struct SlotListView {
+  static constexpr int kDim = D;
+  const int* nbr = nullptr;     // capacity * stride entries
+  const int* counts = nullptr;  // stride entries: the neighbours found (may exceed capacity: overflow)
+  const VecA<D>* pos = nullptr; // positions, numbered like the list's slots (padded: one vector load)
+  int n = 0;
+  int capacity = 0;
+  size_t stride = 0;
+  float r2 = 0.0f;           // squared query radius
+  float list_radius = 0.0f;  // the radius the lists were built with
+
+  CPS_HD int size() const { return n; }
+  CPS_HD bool active(int) const { return true; }
+  CPS_HD Vec<D> position(int i) const { return VecA<D>::load(pos + i); }
+  CPS_HD float max_radius() const { return list_radius; }
+  CPS_HD SlotListView with_radius(float r) const {
+    SlotListView v = *this;
+    v.r2 = r * r;
+    return v;
+  }
+  CPS_HD int count(int i) const { return counts[i] < capacity ? counts[i] : capacity; }
+
+  template <class Visit>
+  CPS_HD void gather(int i, const Vec<D>& xi, Visit&& visit) const {
+    walk<false>(i, xi, visit);
+  }
+  template <class Visit>
+  CPS_HD void pairs(int i, const Vec<D>& xi, Visit&& visit) const {
+    walk<true>(i, xi, visit);
+  }
+  // the listed entries in the order the build found them, within the query radius now. Written
+  // as "find the next entry within the radius, then visit it": on a device the lanes of a warp
+  // search their lists apart (a few instructions an entry) and run the visitor together, so an
+  // entry past the radius costs a lane the search only, not an idle pass through the visitor
+  template <bool kPairs, class Visit>
+  CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit) const {
+    const int c = count(i);
+    const int* e = nbr + i;
+    int k = 0;
+    for (;;) {
+      int j = -1;
+      Vec<D> d;
+      float rr = 0.0f;
+      while (k < c) {
+        const int jj = *e;
+        ++k;
+        e += stride;
+        if (kPairs && jj <= i) continue;
+        d = xi - VecA<D>::load(pos + jj);
+        rr = norm2(d);
+        if (rr < r2) {
+          j = jj;
+          break;
+        }
+      }
+      if (j < 0) return;
+      visit(j, d, rr);
+    }
+  }
+};
+
+// the build of slots [begin, begin + count): the source index's neighbours of slot i within
+// its radius (i itself left out), in the source's gather order; counts[i] = how many there
+// were, *overflow = code (if it was 0) when that is more than the capacity
+template <class View>
+struct SlotListFillFn {
+  View src;
+  int* nbr;
+  int* counts;
+  size_t stride;
+  int capacity;
+  int begin;
+  int* overflow;
+  int code;
+  CPS_HD void operator()(int k) const {
+    const int i = begin + k;
+    int c = 0;
+    if (src.active(i)) {
+      int* e = nbr + i;
+      src.gather(i, src.position(i), [&](int j, const Vec<View::kDim>&, float) {
+        if (j == i) return;
+        if (c < capacity) e[size_t(c) * stride] = j;
+        ++c;
+      });
+    }
+    counts[i] = c;
+    if (c > capacity && overflow) atomic_cas(overflow, 0, code);
+  }
+};
+
+template <int D, class Exec>
+class SlotNeighborList {
+ public:
+  template <class T>
+  using Buffer = typename Exec::template Buffer<T>;
+
+  // room for n slots of `capacity` entries (the contents are lost)
+  void reserve(Exec& ex, int n, int capacity) {
+    if (n < 0 || capacity < 1)
+      throw Error("neighbour list: needs n >= 0 slots and a capacity of at least 1, got " + std::to_string(n) +
+                  " and " + std::to_string(capacity));
+    n_ = n;
+    capacity_ = capacity;
+    stride_ = size_t(n > 0 ? n : 1);
+    ex.resize(nbr_, stride_ * size_t(capacity));
+    ex.resize(counts_, stride_);
+  }
+  static double bytes(int n, int capacity) { return double(n > 0 ? n : 1) * (double(capacity) + 1.0) * sizeof(int); }
+
+  // list slots [begin, begin + count) from the source view within list_radius (at most its
+  // radius); when `when` is given, only if *when != 0 (read on the device: a stage can skip the
+  // build without a host round trip). Overflow: *overflow = code, the counts are the true ones.
+  template <class View>
+  void fill(Exec& ex, const View& src, float list_radius, int begin, int count, int* overflow, int code,
+            const int* when = nullptr) {
+    static_assert(View::kDim == D, "the source index has another dimension");
+    if (!(list_radius > 0.0f) || !(list_radius <= src.max_radius()))
+      throw Error("neighbour list: the list radius " + std::to_string(list_radius) +
+                  " must be positive and at most the source index's radius " + std::to_string(src.max_radius()));
+    if (begin < 0 || count < 0 || begin + count > n_)
+      throw Error("neighbour list: slots " + std::to_string(begin) + " + " + std::to_string(count) + " outside the " +
+                  std::to_string(n_) + " reserved");
+    list_radius_ = list_radius;
+    SlotListFillFn<View> f{src.with_radius(list_radius), nbr_.data(), counts_.data(), stride_, capacity_, begin,
+                           overflow, code};
+    if (when) ex.for_each_if(when, count, f);
+    else ex.for_each(count, f);
+  }
+
+  // the lists over positions `pos` (numbered like the source's slots), queried with radius
+  // (at most the list radius)
+  SlotListView<D> view(const VecA<D>* pos, float radius) const {
+    if (radius > list_radius_)
+      throw Error("neighbour list: a query radius of " + std::to_string(radius) + " exceeds the list radius " +
+                  std::to_string(list_radius_));
+    SlotListView<D> v;
+    v.nbr = nbr_.data();
+    v.counts = counts_.data();
+    v.pos = pos;
+    v.n = n_;
+    v.capacity = capacity_;
+    v.stride = stride_;
+    v.r2 = radius * radius;
+    v.list_radius = list_radius_;
+    return v;
+  }
+
+  // the largest count of the last build (a host read-back: for growing after an overflow)
+  int max_count(Exec& ex) const {
+    if (n_ <= 0) return 0;
+    std::vector<int> c(n_);
+    ex.synchronize();
+    ex.to_host(c.data(), counts_.data(), size_t(n_) * sizeof(int));
+    return *std::max_element(c.begin(), c.end());
+  }
+
+  int size() const { return n_; }
+  int capacity() const { return capacity_; }
+  size_t stride() const { return stride_; }
+  float list_radius() const { return list_radius_; }
+  const int* neighbors() const { return nbr_.data(); }
+  const int* counts() const { return counts_.data(); }
+
+ private:
+  int n_ = 0, capacity_ = 0;
+  size_t stride_ = 1;
+  float list_radius_ = 0.0f;
+  Buffer<int> nbr_, counts_;
 };
 
 }  // namespace cps

@@ -66,6 +66,16 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   m.hi = vecd<D>(p, "box_hi", kind);
   m.domain_lo = vecd<D>(p, "domain_lo", kind);
   m.domain_hi = vecd<D>(p, "domain_hi", kind);
+  // the lists index's parameters (other indexes: list_radius = h, unused)
+  m.list_radius = p.has("list_radius") ? p.f("list_radius") : m.h;
+  const float rebuild = p.has("rebuild_distance") ? p.f("rebuild_distance") : 0.0f;
+  m.rebuild_disp2 = rebuild * rebuild;
+  m.max_neighbors = p.has("max_neighbors") ? int(p.integer("max_neighbors")) : 1;
+  if (!(m.list_radius >= m.h) || !finite(m.list_radius))
+    throw Error(std::string(kind) + ": list_radius must be at least h, got " + std::to_string(m.list_radius));
+  if (!(rebuild >= 0.0f) || !(2.0f * rebuild <= m.list_radius - m.h + 1e-6f * m.h))
+    throw Error(std::string(kind) + ": rebuild_distance must be in [0, (list_radius - h) / 2], got " + std::to_string(rebuild));
+  if (m.max_neighbors < 1) throw Error(std::string(kind) + ": max_neighbors must be at least 1");
   auto probes = p.numbers("probes");
   if (probes.size() % D != 0) throw Error(std::string(kind) + ": probes need " + std::to_string(D) + " numbers each");
   m.n_probes = int(probes.size() / D);
@@ -103,7 +113,8 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
 }
 
 inline const std::vector<std::string>& index_names() {
-  static const std::vector<std::string> names = {GridIndex::name, CompactIndex::name, AllPairsIndex::name};
+  static const std::vector<std::string> names = {GridIndex::name, CompactIndex::name, AllPairsIndex::name,
+                                                 ListsIndex::name};
   return names;
 }
 
@@ -113,7 +124,8 @@ std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
   if (idx == GridIndex::name) return make_with<Exec, GridIndex, KindT>(std::move(ex), r);
   if (idx == CompactIndex::name) return make_with<Exec, CompactIndex, KindT>(std::move(ex), r);
   if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex, KindT>(std::move(ex), r);
-  throw Error(std::string(KindT::name) + ": unknown index '" + idx + "' (indexes: grid, compact, allpairs)");
+  if (idx == ListsIndex::name) return make_with<Exec, ListsIndex, KindT>(std::move(ex), r);
+  throw Error(std::string(KindT::name) + ": unknown index '" + idx + "' (indexes: grid, compact, allpairs, lists)");
 }
 
 // any of the three kinds by name (null: not one of them)
@@ -129,6 +141,7 @@ template <class KindT, class Exec>
 double bytes_of(const SimRequest& r) {
   auto m = std::make_unique<Model<KindT::D>>(build_model<KindT>(*r.params));
   if (r.index == CompactIndex::name) return Pipeline<Exec, CompactIndex, KindT>::bytes_needed(*m);
+  if (r.index == ListsIndex::name) return Pipeline<Exec, ListsIndex, KindT>::bytes_needed(*m);
   return Pipeline<Exec, GridIndex, KindT>::bytes_needed(*m);
 }
 

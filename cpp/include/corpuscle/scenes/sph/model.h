@@ -58,6 +58,13 @@ struct Model {
   Vec<D> gravity;
   Vec<D> lo, hi;            // the box the fluid is held in (the walls' inner faces)
   Vec<D> domain_lo, domain_hi;  // the box with its wall layers (the cell grid's domain)
+  // the `lists` index: slot lists within list_radius = h (1 + skin), built on the steps that
+  // sort and reused until a particle has moved more than skin h / 2 since (rebuild_disp2 is
+  // that distance squared); max_neighbors entries per slot (grown on overflow). Other
+  // indexes: list_radius = h, unused.
+  float list_radius;
+  float rebuild_disp2;
+  int max_neighbors;
   int n_probes;
   float probes[kMaxProbes * D];
   CPS_HD Vec<D> probe(int k) const {
@@ -113,6 +120,7 @@ struct SumsOp {
 };
 
 constexpr int kBadParticles = 1;  // a density, velocity or position went non-finite
+constexpr int kBadNeighbors = 2;  // a neighbour list overflowed (grown and the step repeated when memory allows)
 
 // the input of the next step: a body acceleration added to gravity (shaking or tilting the
 // box in its own frame: sloshing)
@@ -126,6 +134,9 @@ struct Scene {
   StepSums sums;     // the last step's reductions (diagnostics)
   StepSums pending;  // this step's, kept in sums once the step is taken
   float step_dt;     // the dt this step integrates with (0: not taken)
+  int rebuild;             // `lists`: this step sorts and relists (raised by the last step's
+                           // integration when a particle moved more than skin h / 2 since the build)
+  long long rebuilds;      // `lists`: the steps taken that relisted
   long long outside;       // fluid particles outside the box after the last step
   long long outside_max;   // the most there were after any step
   // probes: pressure, velocity and the Shepard sum sum_j W_j V_j of the state a step starts
@@ -134,6 +145,17 @@ struct Scene {
   float probe_p[kMaxProbes];
   float probe_v[kMaxProbes * 3];
   float probe_w[kMaxProbes];
+};
+
+// what the pair loop reads of a neighbour j besides its position, packed for one vector load
+// each (the same values as the arrays they come from): velocity (3-D; 2-D: the first two) and
+// p / rho^2 in 16 bytes, rho and m / rho in 8
+struct alignas(16) PairVel {
+  float v[3];
+  float pr2;
+};
+struct alignas(8) PairRho {
+  float rho, vol;
 };
 
 // structure of arrays (slots in sorted order; *_alt: the other buffers)
@@ -145,6 +167,10 @@ struct Arrays {
   float *rhom, *rhom_alt;   // the previous step's density (Verlet)
   int *id, *id_alt;
   float* prs;        // pressure of the sorted state (from rho by Tait)
+  PairVel* pv;       // the pair loop's velocity and p / rho^2 of the sorted state
+  PairRho* pr;       // the pair loop's rho and m / rho (the density diffusion's V_j)
+  VecA<D>* pos4;     // the sorted positions padded for one vector load (the lists' walk)
+  Vec<D>* x_build;   // `lists`: positions at the last build (sorted slots; null for other indexes)
   Vec<D>* acc;       // dv/dt (fluid; zero for walls)
   float* drho;       // drho/dt
   StepSums* items;

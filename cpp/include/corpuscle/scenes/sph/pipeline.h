@@ -14,6 +14,14 @@
 //             neighbour cells' particles staged through shared memory (spatial/compact_grid.h);
 //             bit-identical to grid
 //   allpairs  every particle against every other, O(N^2) (CUDA: shared-memory tiles of 128)
+//   lists     Verlet lists (spatial/neighbor_list.h's slot lists): cells of h (1 + skin) are walked
+//             only on the steps that relist, listing every slot's neighbours within h (1 + skin),
+//             stored slot-interleaved so a thread per particle reads them coalesced and every
+//             lane of the pair loop evaluates a listed neighbour; the other steps keep the order
+//             (each slot keeps its sorted key: the stable sort leaves it in place) and walk the
+//             lists. The integration raises the next step's relisting when a particle has
+//             moved more than skin h / 2 since the build (so every pair within h then was within
+//             h (1 + skin) at the build). skin = 0: relists every step, bit-identical to grid.
 #pragma once
 #include <cmath>
 #include <string>
@@ -25,6 +33,7 @@
 #include "corpuscle/scenes/sph/tables.h"
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/compact_grid.h"
+#include "corpuscle/spatial/neighbor_list.h"
 
 namespace cps::sph {
 
@@ -37,6 +46,13 @@ struct CompactIndex {
 struct AllPairsIndex {
   static constexpr const char* name = "allpairs";
 };
+struct ListsIndex {
+  static constexpr const char* name = "lists";
+};
+
+// the pair stage's blocks per multiprocessor on CUDA (__launch_bounds__: 128 threads and 8
+// blocks leave 64 registers a thread; the cell walk's 72 gave 7 blocks, 44% occupancy)
+constexpr int kPairBlocksPerSM = 8;
 
 // the kinds this pipeline carries (their dimension and name)
 struct FluidBoxKind {
@@ -66,21 +82,27 @@ class Pipeline {
   static constexpr const char* kind = KindT::name;
   static constexpr const char* index_name = Index::name;
   static constexpr int kNumStages = 5;
+  static constexpr bool kLists = std::is_same_v<Index, ListsIndex>;
   static const char* stage_name(int s) {
     static const char* const names[] = {"sort+reorder+mark", "interactions", "probes", "reduce+finalize",
                                         "integrate"};
     return names[s];
   }
 
-  static CellGridSpec<D> grid_spec(const ModelT& m) { return make_cell_grid<D>(m.domain_lo, m.domain_hi, m.h, 2); }
+  // cells of the support radius (lists: of the list radius, which the builds walk)
+  static CellGridSpec<D> grid_spec(const ModelT& m) {
+    return make_cell_grid<D>(m.domain_lo, m.domain_hi, kLists ? m.list_radius : m.h, 2);
+  }
 
   static double bytes_needed(const ModelT& m) {
     const double n = double(m.n_fluid) + double(m.n_wall);
     const double per = 2 * (3 * sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int)) + sizeof(float) + sizeof(Vec<D>) +
+                       sizeof(PairVel) + sizeof(PairRho) + sizeof(VecA<D>) +
                        sizeof(float) + sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
-                       (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0);
+                       (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
-    return n * per + cells + sizeof(ModelT);
+    const double lists = kLists ? SlotNeighborList<D, Exec>::bytes(int(n), m.max_neighbors) : 0.0;
+    return n * per + cells + lists + sizeof(ModelT);
   }
 
   CPS_KIND_TABLES(CPS_SPH_FIELDS, CPS_SPH_SCALARS, CPS_SPH_CONTROLS, Scene, Control)
@@ -101,6 +123,15 @@ class Pipeline {
       id_[p].resize(n_);
     }
     prs_.resize(n_);
+    pv_.resize(n_);
+    pr_.resize(n_);
+    pos4_.resize(n_);
+    if constexpr (kLists) {
+      if (!(m.list_radius >= m.h) || !(m.rebuild_disp2 >= 0.0f) || m.max_neighbors < 1)
+        throw Error(std::string(kind) + ": lists need list_radius >= h, rebuild_distance >= 0 and max_neighbors >= 1");
+      x_build_.resize(n_);
+      lists_.reserve(ex_, n_, m.max_neighbors);
+    }
     acc_.resize(n_);
     drho_.resize(n_);
     items_.resize(n_);
@@ -117,60 +148,113 @@ class Pipeline {
     Scene s{};
     s.clock = start_clock();
     s.sums = s.pending = StepSums::identity();
+    s.rebuild = 1;
     return s;
   }
   static void restored(Scene& r) {
     r.pending = r.sums;
     r.step_dt = 0.0f;
+    r.rebuild = 1;  // a restored state relists
   }
 
   long long particles() const { return nf_; }  // the fluid (the walls: n_wall in derived())
   int scenes() const { return 1; }
+
+  // `lists`: a list that overflowed stopped the step before it was taken (kBadNeighbors); the
+  // capacity grows to 1.25 times the largest count found (the counts are the true ones) and
+  // the step is repeated with new lists. False (the run stops) when nothing overflowed or the
+  // larger lists would not fit in `bytes_free`.
   template <class R>
-  bool recover(std::vector<R>&, double) { return false; }
+  bool recover(std::vector<R>& recs, double bytes_free) {
+    if constexpr (!kLists) {
+      return false;
+    } else {
+      bool overflow = false;
+      for (const R& r : recs) overflow = overflow || r.clock.bad == kBadNeighbors;
+      if (!overflow) return false;
+      const int need = lists_.max_count(ex_);
+      long long want = (long long)(1.25 * double(need)) + 32;
+      want = (want + 31) / 32 * 32;
+      if (want > n_) want = n_;  // never more than every other slot
+      if (want <= m_.max_neighbors) return false;
+      const double extra = SlotNeighborList<D, Exec>::bytes(n_, int(want)) - SlotNeighborList<D, Exec>::bytes(n_, m_.max_neighbors);
+      if (extra > bytes_free) return false;
+      m_.max_neighbors = int(want);
+      ex_.to_device(model_.data(), &m_, sizeof(ModelT));
+      lists_.reserve(ex_, n_, m_.max_neighbors);
+      for (R& r : recs)
+        if (r.clock.bad == kBadNeighbors) {  // the step was not taken: it is repeated, relisting
+          r.clock.bad = 0;
+          r.clock.bad_step = -1;
+          r.rebuild = 1;
+        }
+      return true;
+    }
+  }
   const ModelT& model() const { return m_; }
   int graph_slot() const { return parity_; }
 
-  void prepare() {}
+  // `lists`: a replaced state relists at its next step (outside any captured graph)
+  void prepare() {
+    if constexpr (kLists) {
+      if (relist_) ex_.single(RaiseRebuildStage{g_});
+    }
+    relist_ = false;
+  }
   void advance(bool) { parity_ ^= 1; }
-  void invalidate(bool) {}
+  void invalidate(bool) { relist_ = true; }
 
   void enqueue(bool integrate) {
     const int cur = parity_, nxt = parity_ ^ 1;
     ModelT* md = model_.data();
     Scene* g = g_;
     // 1. key and sort (fluid tag 0, walls tag 1), gather into cell order, mark, chunk
-    grid_.sort(ex_, pos_[cur].data(), tags_.data(), n_);
-    ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt)});
+    //    (lists: a step that does not relist keeps every slot's key, so the order stands, and
+    //    the lists are built on the steps that relist only)
+    if constexpr (kLists) grid_.sort_if(ex_, pos_[cur].data(), tags_.data(), n_, &g->rebuild);
+    else grid_.sort(ex_, pos_[cur].data(), tags_.data(), n_);
+    ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), kLists ? &g->rebuild : nullptr});
     grid_.mark(ex_);
     Arrays<D> s = arrays(nxt, cur);
     CellGridView<D> gv = grid_.view(s.pos);
     if constexpr (std::is_same_v<Index, CompactIndex>) compact_.build(ex_, gv);
+    if constexpr (kLists) {
+      lists_.fill(ex_, gv, m_.list_radius, 0, nf_, &g->clock.bad, kBadNeighbors, &g->rebuild);
+      if (n_ > nf_)  // the walls list the fluid only
+        lists_.fill(ex_, gv.tags(kTagFluid, kTagFluid + 1), m_.list_radius, nf_, n_ - nf_, &g->clock.bad,
+                    kBadNeighbors, &g->rebuild);
+    }
     ex_.mark(0);
     // 2. the pair sums through the index
     InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
-    if constexpr (std::is_same_v<Index, AllPairsIndex>) {
+    if constexpr (kLists) {
+      using Fn = ListGatherFn<SlotListView<D>, InteractStage<D>>;
+      const SlotListView<D> lv = lists_.view(s.pos4, m_.h);
+      ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, Fn{lv, st, 0});
+      if (n_ > nf_) ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
+    } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
       AllPairsView<D> av{s.pos, n_, m_.h * m_.h};
       if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
       else gather_stage(ex_, av, st);
     } else if constexpr (std::is_same_v<Index, CompactIndex>) {
       gather_stage_compact(ex_, compact_.view(gv, kTagWall), st);
     } else {
-      ex_.for_each(nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, 0});
-      if (n_ > nf_) ex_.for_each(n_ - nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, nf_});
+      ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, 0});
+      if (n_ > nf_)
+        ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, nf_});
     }
     ex_.mark(1);
     // 3. the probes of this state (the grid's walk; all pairs for that index)
     if (m_.n_probes > 0) {
       if constexpr (std::is_same_v<Index, AllPairsIndex>)
         ex_.for_each(m_.n_probes, ProbeStage<D, AllPairsView<D>>{md, g, s, AllPairsView<D>{s.pos, n_, m_.h * m_.h}, nf_});
-      else
-        ex_.for_each(m_.n_probes, ProbeStage<D, CellGridView<D>>{md, g, s, gv, nf_});
+      else  // (lists: the cells of the last build, of the list radius, hold every fluid particle within h)
+        ex_.for_each(m_.n_probes, ProbeStage<D, CellGridView<D>>{md, g, s, kLists ? gv.with_radius(m_.h) : gv, nf_});
     }
     ex_.mark(2);
     if (integrate) {
       // 4. the reductions and the per-scene update
-      ex_.reduce_then(s.items, n_, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage<D>{md, g});
+      ex_.reduce_then(s.items, n_, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage<D>{md, g, kLists});
       ex_.mark(3);
       // 5. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n_, IntegrateStage<D>{md, g, s, nf_});
@@ -194,6 +278,7 @@ class Pipeline {
   // fluid positions (ids restart at 0..n-1), velocities, densities, a checkpoint's ids, or
   // the walls' positions and densities
   void upload(const std::string& name, const void* src, long long count) {
+    relist_ = true;
     const int nf = nf_, nw = n_ - nf_;
     const bool wall = name.rfind("wall_", 0) == 0;
     const long long want = wall ? nw : nf;
@@ -228,7 +313,7 @@ class Pipeline {
 
   std::vector<std::pair<std::string, double>> derived(const Scene& r) const {
     const double nbrs = nf_ > 0 ? double(r.sums.nbrs) / double(nf_) : 0.0;
-    return {{"vmax", std::sqrt(double(r.sums.vmax2))},
+    std::vector<std::pair<std::string, double>> out = {{"vmax", std::sqrt(double(r.sums.vmax2))},
             {"amax", std::sqrt(double(r.sums.amax2))},
             {"mean_neighbors", nbrs},
             {"chosen_dt", double(choose_dt_cfl(m_.cfl, m_.hs, std::sqrt(r.sums.amax2), m_.c0, r.sums.mu_max,
@@ -236,6 +321,11 @@ class Pipeline {
             {"n_fluid", double(nf_)},
             {"n_wall", double(n_ - nf_)},
             {"grid_cells", double(grid_.spec().ncells)}};
+    if constexpr (kLists) {
+      out.push_back({"list_capacity", double(m_.max_neighbors)});
+      out.push_back({"list_radius", double(m_.list_radius)});
+    }
+    return out;
   }
 
  private:
@@ -254,6 +344,10 @@ class Pipeline {
     a.id = id_[cur].data();
     a.id_alt = id_[nxt].data();
     a.prs = prs_.data();
+    a.pv = pv_.data();
+    a.pr = pr_.data();
+    a.pos4 = pos4_.data();
+    a.x_build = kLists ? x_build_.data() : nullptr;
     a.acc = acc_.data();
     a.drho = drho_.data();
     a.items = items_.data();
@@ -271,6 +365,12 @@ class Pipeline {
   Buf<float> rho_[2], rhom_[2];
   Buf<int> id_[2];
   Buf<float> prs_, drho_;
+  Buf<PairVel> pv_;
+  Buf<PairRho> pr_;
+  Buf<VecA<D>> pos4_;
+  Buf<Vec<D>> x_build_;
+  SlotNeighborList<D, Exec> lists_;
+  bool relist_ = false;
   Buf<Vec<D>> acc_;
   Buf<StepSums> items_;
   Buf<int> tags_;

@@ -16,23 +16,43 @@ CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
 }
 
 // stage 1: the current arrays gathered into cell order (order: sorted slot -> input slot),
-// and the pressure of the sorted state from its density (Tait)
+// and the pressure of the sorted state from its density (Tait) with the pair loop's
+// per-particle factors p / rho^2 and m / rho (the same operations the pair terms would do per
+// pair: the same values). `lists`: on the steps that relist (*rebuild), the positions the
+// lists are built from are kept in x_build.
 template <int D>
 struct ReorderStage {
   const Model<D>* model;
   const int* order;
   Arrays<D> a;
+  const int* rebuild = nullptr;  // `lists` only
   CPS_HD void operator()(int j) const {
     const int o = order[j];
-    a.pos_alt[j] = a.pos[o];
+    const Vec<D> x = a.pos[o];
+    a.pos_alt[j] = x;
     a.vel_alt[j] = a.vel[o];
     a.velm_alt[j] = a.velm[o];
     a.rhom_alt[j] = a.rhom[o];
     const float rho = a.rho[o];
     a.rho_alt[j] = rho;
     a.id_alt[j] = a.id[o];
-    a.prs[j] = tait_pressure(*model, rho);
+    const float p = tait_pressure(*model, rho);
+    a.prs[j] = p;
+    const Vec<D> v = a.vel[o];
+    PairVel pv;
+    for (int k = 0; k < 3; ++k) pv.v[k] = k < D ? v[k] : 0.0f;
+    pv.pr2 = p / (rho * rho);
+    a.pv[j] = pv;
+    a.pr[j] = PairRho{rho, model->mass / rho};
+    a.pos4[j] = VecA<D>::of(x);
+    if (rebuild && *rebuild) a.x_build[j] = x;
   }
+};
+
+// `lists`: the next step relists (a new or replaced state, or grown lists)
+struct RaiseRebuildStage {
+  Scene* g;
+  CPS_HD void operator()(int) const { g->rebuild = 1; }
 };
 
 // stage 2: the pair sums of particle i (the sorted arrays of `a`):
@@ -48,13 +68,18 @@ template <int D>
 struct PairConsts {
   SphKernel<D> kern;  // the gradient kernel
   float mass, hs, c0;
+  float eta2;  // 0.01 hs^2: the eta^2 of every pair term (mu_ij, both viscosities, the diffusion)
   int viscosity;
   ArtificialViscosity av;
   LaminarViscosity lv;
   DensityDiffusion dd;
   Vec<D> gravity;
   static PairConsts make(const Model<D>& m) {
-    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.viscosity, m.av, m.lv, m.dd, m.gravity};
+    // the terms were made from the same hs with the same expression (0.01f * hs * hs)
+    if (m.av.eta2 != m.lv.eta2 || (m.dd.kind != DensityDiffusionKind::None && m.dd.eta2 != m.av.eta2) ||
+        m.av.hs != m.hs)
+      throw Error("sph: the pair terms' eta^2 or hs differ");
+    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.av.eta2, m.viscosity, m.av, m.lv, m.dd, m.gravity};
   }
 };
 
@@ -65,42 +90,57 @@ struct InteractStage {
   Arrays<D> a;
   int nf;
 
+  // the sums of particle i, and what the pair loop reads of i (loaded once, in begin)
   struct Acc {
     Vec<D> acc;
     float drho;
     float mu_max;
     int nbrs;
+    Vec<D> vel_i;
+    float rho_i, pr2_i;
   };
 
-  CPS_HD Acc begin(int) const {
+  CPS_HD Acc begin(int i) const {
     Acc s;
     s.acc = Vec<D>::zero();
     s.drho = 0.0f;
     s.mu_max = 0.0f;
     s.nbrs = 0;
+    s.vel_i = a.vel[i];
+    s.rho_i = a.rho[i];
+    s.pr2_i = a.pv[i].pr2;
     return s;
   }
 
+  // (the square root and the divisions are the fast forms of core/hd.h: exact on the host)
   CPS_HD void visit(Acc& s, int i, int j, const Vec<D>& d, float r2) const {
     if (j == i) return;
     const bool fi = i < nf, fj = j < nf;
     if (!fi && !fj) return;
-    const float r = fsqrt(r2);
+    const float r = fsqrt_fast(r2);
     const Vec<D> gw = m.kern.grad(d, r);
-    const Vec<D> dv = a.vel[i] - a.vel[j];
+    const PairVel pv = a.pv[j];  // (one vector load each)
+    Vec<D> dv;
+    for (int k = 0; k < D; ++k) dv[k] = s.vel_i[k] - pv.v[k];
     s.drho += m.mass * dot(dv, gw);
     if (!fi) return;
     s.nbrs += 1;
-    const float rho_i = a.rho[i], rho_j = a.rho[j];
-    const float mu = sph_mu<D>(m.hs, m.av.eta2, d, dv, r2);
+    const PairRho pr = a.pr[j];
+    const float rho_i = s.rho_i, rho_j = pr.rho;
+    // r^2 + eta^2 and v_ij . r_ij, once for every term (each term's eta^2 is the same 0.01 hs^2,
+    // PairConsts::make: so this is the value each would compute)
+    const float den = r2 + m.eta2;
+    const float vr = dot(dv, d);
+    const float mu = sph_mu_den(m.hs, vr, den);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) s.drho += density_diffusion_rate<D>(m.dd, d, r2, rho_i, rho_j, m.mass, gw);
-    const float pterm = a.prs[i] / (rho_i * rho_i) + a.prs[j] / (rho_j * rho_j);
+    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, den, rho_i, rho_j, pr.vol, gw);
+    // p_i / rho_i^2 + p_j / rho_j^2 (each computed once per particle, in the reorder)
+    const float pterm = s.pr2_i + pv.pr2;
     s.acc -= gw * (m.mass * pterm);
     if (m.viscosity == kArtificialViscosity)
-      s.acc += artificial_viscosity_acc<D>(m.av, d, dv, r2, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
+      s.acc += artificial_viscosity_acc_mu<D>(m.av, vr, mu, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
     else
-      s.acc += laminar_viscosity_acc<D>(m.lv, d, dv, r2, rho_i, rho_j, m.mass, gw);
+      s.acc += laminar_viscosity_acc_den<D>(m.lv, d, dv, den, rho_i, rho_j, m.mass, gw);
   }
 
   CPS_HD void end(int i, Acc& s) const {
@@ -110,12 +150,12 @@ struct InteractStage {
       Vec<D> acc = s.acc + m.gravity;
       for (int k = 0; k < D; ++k) acc[k] += ctl->acc[k];
       a.acc[i] = acc;
-      const Vec<D> v = a.vel[i];
+      const Vec<D> v = s.vel_i;
       it.amax2 = norm2(acc);
       it.vmax2 = norm2(v);
       it.mu_max = s.mu_max;
       it.ke = 0.5f * m.mass * it.vmax2;
-      it.rho_min = it.rho_max = a.rho[i];
+      it.rho_min = it.rho_max = s.rho_i;
       it.nbrs = s.nbrs;
       if (!finite(it.amax2 + s.drho)) it.bad = 1;
     } else {
@@ -142,6 +182,21 @@ struct GridGatherFn {
     auto acc = stage.begin(i);
     const CellGridView<D> v = i < nf ? view : view.tags(kTagFluid, kTagFluid + 1);
     v.gather(i, v.position(i), [&](int j, const Vec<D>& d, float r2) { stage.visit(acc, i, j, d, r2); });
+    stage.end(i, acc);
+  }
+};
+
+// the pair stage through the `lists` index (slot lists, spatial/neighbor_list.h), one thread per
+// slot from `base` (the fluid and the walls as two loops, as GridGatherFn)
+template <class View, class Stage>
+struct ListGatherFn {
+  View view;
+  Stage stage;
+  int base;
+  CPS_HD void operator()(int k) const {
+    const int i = base + k;
+    auto acc = stage.begin(i);
+    view.gather(i, view.position(i), [&](int j, const Vec<View::kDim>& d, float r2) { stage.visit(acc, i, j, d, r2); });
     stage.end(i, acc);
   }
 };
@@ -183,6 +238,7 @@ template <int D>
 struct FinalizeStage {
   const Model<D>* model;
   Scene* g;
+  bool lists = false;  // `lists`: count the step's relisting and lower the flag for the next one
   CPS_HD void operator()(int) const {
     const Model<D>& m = *model;
     Scene& G = *g;
@@ -210,6 +266,10 @@ struct FinalizeStage {
     if (G.outside > G.outside_max) G.outside_max = G.outside;
     G.outside = 0;
     G.step_dt = dt;
+    if (lists) {
+      G.rebuilds += G.rebuild != 0 ? 1 : 0;
+      G.rebuild = 0;  // this step's readers are done with it; the integration may raise it again
+    }
     advance_clock(C, dt, last);
   }
 };
@@ -260,6 +320,8 @@ struct IntegrateStage {
       sum += x[k] + v[k];
     }
     if (out) add_count(&g->outside, 1);
+    // `lists`: moved more than skin h / 2 since the build: the next step relists
+    if (a.x_build && norm2(x - a.x_build[i]) > m.rebuild_disp2 && g->rebuild == 0) atomic_max(&g->rebuild, 1);
     if (!finite(sum)) raise_first(&g->clock.bad, kBadParticles);
   }
 };

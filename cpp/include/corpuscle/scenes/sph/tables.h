@@ -31,6 +31,7 @@
   X(sums_rho_max, float, 1, sums.rho_max, true)         \
   X(sums_p_max, float, 1, sums.p_max, true)             \
   X(sums_nbrs, long long, 1, sums.nbrs, true)           \
+  X(rebuilds, long long, 1, rebuilds, true)             \
   X(outside, long long, 1, outside, true)               \
   X(outside_max, long long, 1, outside_max, true)       \
   X(probe_time, double, 1, probe_time, false)           \
