@@ -74,6 +74,9 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "sph.reference_particles": _K("int", 3500, "", 1, INT32_MAX, "particle count at which sph.h applies"),
     "sph.skin": _K("float", 0.2, "h", 0.0, 1.0,
                    "neighbour-list skin: lists reach h (1 + skin) and are reused until a particle moved too far; 0 rebuilds every step"),
+    "sph.lanes": _K("enum", "auto", "", doc="CUDA threads per particle in the density and force passes: a warp (32) "
+                    "or groups of 16, 8 or 4 of one; auto: chosen by the state's size (the CPU runs one)",
+                    choices=("auto", "32", "16", "8", "4")),
     "sph.max_list_memory": _K("float", 0.0, "MB", 0.0, 1e9,
                               "most memory the neighbour lists may grow to when they overflow; 0: what the backend has free"),
     # gravity
@@ -226,16 +229,16 @@ class Magic8Ball(Kind):
             "shakes": [dict(start=s["start"], end=s["end"], acceleration=list(s["acceleration"]),
                             torque=list(s["torque"])) for s in scene.shakes],
         }
-        # neighbour lists reach h (1 + skin) and stand until a particle has moved skin h / 2
-        # (less the stretch of the mirror map, under which a ghost moves up to
-        # (2R - r) / r times as far as its particle at r >= R - h (1 + skin)); skin 0: every step
-        # (grid and allpairs search every step: no skin)
+        # neighbour lists reach h (1 + skin) and stand while no pair can have closed in by the
+        # skin: the core relists a scene once its largest fluid displacement a and ghost
+        # displacement b since the last rebuild reach a + max(a, b) > skin h (moved_too_far in
+        # scenes/magic8ball/stages.h); skin 0: every step (grid and allpairs search every
+        # step: no skin)
         skin = float(v["sph.skin"]) if target.index == "lists" else 0.0
         list_radius = h * (1.0 + skin)
-        r_min = max(radius - list_radius, 0.25 * radius)
-        stretch = (2.0 * radius - r_min) / r_min
         params["list_radius"] = list_radius
-        params["rebuild_distance"] = skin * h / (1.0 + stretch)
+        params["skin_distance"] = list_radius - h
+        params["lanes"] = 0 if v["sph.lanes"] == "auto" else int(v["sph.lanes"])
 
         # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
         # a few percent; a list that still overflows stops the run as unstable), in warp widths

@@ -12,6 +12,17 @@
 
 namespace cps::m8 {
 
+// CUDA lanes per particle in the pair stages when the scene does not say (sph.lanes = auto):
+// a warp each for states that need them to fill the GPU (one scene of a few thousand
+// particles: 32 lanes per particle is what keeps the device busy); kWideLanes for states of
+// at least kWideParticles (a large batch), where narrower groups share a warp's rounds,
+// reductions and per-particle tail. 32 until the narrower widths are measured faster.
+constexpr int kWideLanes = 32;
+constexpr long long kWideParticles = 1LL << 18;
+inline int auto_lanes(const Model& m) {
+  return (long long)m.n_fluid * m.n_scenes >= kWideParticles ? kWideLanes : 32;
+}
+
 inline Model build_model(const ParamSource& p) {
   Model m{};
   m.n_fluid = int(p.integer("n_fluid"));
@@ -24,7 +35,13 @@ inline Model build_model(const ParamSource& p) {
   m.max_near = int(p.integer("max_near"));
   m.max_list_bytes = p.has("max_list_bytes") ? p.number("max_list_bytes") : 0.0;
   m.list_radius = p.f("list_radius");
-  m.rebuild_disp2 = p.f("rebuild_distance") * p.f("rebuild_distance");
+  m.skin_distance = p.f("skin_distance");
+  if (!(m.skin_distance >= 0.0f)) throw Error("magic8ball: skin_distance must not be negative");
+  m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
+  if (m.lanes == 0) m.lanes = auto_lanes(m);
+  if (m.lanes != 4 && m.lanes != 8 && m.lanes != 16 && m.lanes != 32)
+    throw Error("magic8ball: lanes must be 4, 8, 16 or 32 (0: chosen by the state's size), got " +
+                std::to_string(m.lanes));
   m.wall = SphereWall{p.f("radius"), p.f("wall_restitution"), p.f("wall_friction")};
   m.shell_inertia = p.f("shell_inertia");
   m.spin_damping = p.f("spin_damping");

@@ -31,9 +31,10 @@ struct Model {
   int n_scenes;          // independent scenes of the same model in one state (1: a single run)
   int max_neighbors;     // neighbour list capacity per particle (within the list radius)
   int max_near;          // capacity of the per-step list of neighbours within h
+  int lanes;             // CUDA lanes per particle in the pair stages: 32 (a warp), 16, 8 or 4 (the CPU: one)
   double max_list_bytes; // the lists may grow to this on overflow (0: what the backend has free)
   float list_radius;     // neighbour lists and cells: h (1 + skin)
-  float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
+  float skin_distance;   // list_radius - h: how far pairs may close in before the lists are stale (0: every step)
   float h;               // smoothing length
   SphKernels<D> kern;
   SphereWall wall;
@@ -120,7 +121,10 @@ struct Scene {
   FrameMotion frame;     // this step's container-frame terms
   StepSums pending;      // this step's reductions, kept in sums once the step is taken
   float step_dt;         // the dt this step integrates with (0: the step is not taken)
-  int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (raised by step s - 1)
+  int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (a new state: raised before step s)
+  int moved[2];          // since the last rebuild: the largest squared displacement of a fluid particle
+                         // ([0]) and of a ghost that matters ([1]), as float bits (measured by the
+                         // integration; see moved_too_far)
   int n_ghost;           // ghost particles of the last rebuild
 };
 

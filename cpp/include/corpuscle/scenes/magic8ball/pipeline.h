@@ -148,6 +148,7 @@ class Pipeline {
   // a restored record: its scratch starts clean (the first step sorts and relists)
   static void restored(Scene& r) {
     r.rebuild[0] = r.rebuild[1] = 0;
+    r.moved[0] = r.moved[1] = 0;
     r.pending = r.sums;
     r.step_dt = 0.0f;
   }
@@ -196,7 +197,7 @@ class Pipeline {
     //    there, cell ranges) or carry the arrays over; a batch sorts every scene's segments
     //    at once, each scene that does not rebuild keeping its order
     if constexpr (!Many) {
-      ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{g},
+      ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{md, g},
                     ReorderStage<Many>{md, g, a});
     } else {
       ex_.for_each(cap, SelectKeysStage{md, g, a});
@@ -210,15 +211,20 @@ class Pipeline {
     Arrays s = arrays(nxt, cur);
     GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
     // 3. density and pressure (and the neighbour lists); the container frame of this step
-    ex_.for_each_lanes(n, DensityStage<Index, Many>{md, g, u_, s, grid});
+    for_each_pair_lanes(n, DensityStage<Index, Many>{md, g, u_, s, grid});
     ex_.mark(1);
     // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
       if constexpr (!Many) {
-        ex_.for_each_lanes_reduce_then(n, ForceStage<Index, Many>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
-                                       StepSums::identity(), FinalizeStage{md, g});
+        if (m.lanes == 32) {
+          ex_.for_each_lanes_reduce_then(n, ForceStage<Index, Many>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
+                                         StepSums::identity(), FinalizeStage{md, g});
+        } else {
+          for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+          ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
+        }
       } else {
-        ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+        for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
         reduce_scenes(ex_, B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
         ex_.for_each(B, FinalizeStage{md, g, scene_sums_.data()});
       }
@@ -227,7 +233,7 @@ class Pipeline {
       ex_.for_each(keys_items(m), IntegrateStage<Many>{md, g, s});
       ex_.mark(3);
     } else {
-      ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+      for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
       if constexpr (!Many) {
         ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
       } else {
@@ -235,6 +241,18 @@ class Pipeline {
         ex_.for_each(B, StoreSumsStage{g, scene_sums_.data()});
       }
       ex_.mark(2);
+    }
+  }
+
+  // a pair stage with the model's lanes per particle (CUDA: a warp, or groups of 16, 8 or 4
+  // lanes of one; the CPU runs one lane whatever the width)
+  template <class F>
+  void for_each_pair_lanes(int n, const F& f) {
+    switch (m_.lanes) {
+      case 4: ex_.template for_each_lanes_w<4>(n, f); break;
+      case 8: ex_.template for_each_lanes_w<8>(n, f); break;
+      case 16: ex_.template for_each_lanes_w<16>(n, f); break;
+      default: ex_.for_each_lanes(n, f); break;
     }
   }
 
@@ -331,6 +349,7 @@ class Pipeline {
             {"mean_density", double(r.sums.rho_sum) / double(r.phys.n_active)},
             {"max_neighbors", double(m_.max_neighbors)},  // the list capacities now (they grow)
             {"max_near", double(m_.max_near)},
+            {"lanes", double(m_.lanes)},  // CUDA lanes per particle in the pair stages
             {"die_angular_velocity_x", double(w[0])},
             {"die_angular_velocity_y", double(w[1])},
             {"die_angular_velocity_z", double(w[2])}};
