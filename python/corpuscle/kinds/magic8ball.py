@@ -74,9 +74,8 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "sph.reference_particles": _K("int", 3500, "", 1, INT32_MAX, "particle count at which sph.h applies"),
     "sph.skin": _K("float", 0.2, "h", 0.0, 1.0,
                    "neighbour-list skin: lists reach h (1 + skin) and are reused until a particle moved too far; 0 rebuilds every step"),
-    "sph.lanes": _K("enum", "auto", "", doc="CUDA threads per particle in the density and force passes: a warp (32) "
-                    "or groups of 16, 8 or 4 of one; auto: chosen by the state's size (the CPU runs one)",
-                    choices=("auto", "32", "16", "8", "4")),
+    "sph.lanes": _K("int", 0, "", 0, 32, "CUDA threads per particle in the density and force passes: a warp (32) "
+                    "or groups of 16, 8 or 4 of one; 0: chosen by the state's size (the CPU runs one)"),
     "sph.max_list_memory": _K("float", 0.0, "MB", 0.0, 1e9,
                               "most memory the neighbour lists may grow to when they overflow; 0: what the backend has free"),
     # gravity
@@ -127,13 +126,20 @@ def _die_inside_container(values: dict[str, Any], arrays: dict[str, list[dict[st
             f"container.radius = {_fmt_value(radius)}"
         )
 
+def _lanes_width(values: dict[str, Any], arrays: dict[str, list[dict[str, Any]]]) -> None:
+    """sph.lanes is a width the CUDA pair passes have (or 0: automatic)."""
+    if values["sph.lanes"] not in (0, 4, 8, 16, 32):
+        raise SceneError(f"sph.lanes must be 0 (automatic), 4, 8, 16 or 32, got {_fmt_value(values['sph.lanes'])}")
+
+
 SCHEMA = SceneKind(
     name="magic8ball",
     description="3-D SPH fluid in a sphere with a rigid cube die (seed 001)",
     keys=MAGIC8BALL_KEYS,
     arrays={"shake": SHAKE_KEYS},
     required_in_arrays={"shake": ("start", "end")},
-    checks=[check_le("timestep.dt_min", "timestep.dt_max"), check_windows("shake"), _die_inside_container],
+    checks=[check_le("timestep.dt_min", "timestep.dt_max"), check_windows("shake"), _die_inside_container,
+            _lanes_width],
 )
 
 
@@ -238,7 +244,7 @@ class Magic8Ball(Kind):
         list_radius = h * (1.0 + skin)
         params["list_radius"] = list_radius
         params["skin_distance"] = list_radius - h
-        params["lanes"] = 0 if v["sph.lanes"] == "auto" else int(v["sph.lanes"])
+        params["lanes"] = int(v["sph.lanes"])
 
         # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
         # a few percent; a list that still overflows stops the run as unstable), in warp widths
