@@ -75,7 +75,11 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "sph.skin": _K("float", 0.2, "h", 0.0, 1.0,
                    "neighbour-list skin: lists reach h (1 + skin) and are reused until a particle moved too far; 0 rebuilds every step"),
     "sph.lanes": _K("int", 0, "", 0, 32, "CUDA threads per particle in the density and force passes: a warp (32) "
-                    "or groups of 16, 8 or 4 of one; 0: chosen by the state's size (the CPU runs one)"),
+                    "or groups of 16, 8 or 4 of one; 0: chosen by the state's size (32 below 262,144 particles in all, "
+                    "8 from there; the CPU runs one)"),
+    "sph.list_build": _K("enum", "auto", "", doc="how the neighbour lists are rebuilt: cells (the 27 cells around "
+                         "each particle) or scan (every particle and ghost of its scene: cheaper for small scenes); "
+                         "auto: scan up to 1,500 particles a scene", choices=("auto", "cells", "scan")),
     "sph.max_list_memory": _K("float", 0.0, "MB", 0.0, 1e9,
                               "most memory the neighbour lists may grow to when they overflow; 0: what the backend has free"),
     # gravity
@@ -245,6 +249,7 @@ class Magic8Ball(Kind):
         params["list_radius"] = list_radius
         params["skin_distance"] = list_radius - h
         params["lanes"] = int(v["sph.lanes"])
+        params["list_scan"] = {"auto": -1, "cells": 0, "scan": 1}[v["sph.list_build"]]
 
         # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
         # a few percent; a list that still overflows stops the run as unstable), in warp widths

@@ -32,6 +32,7 @@ struct Model {
   int max_neighbors;     // neighbour list capacity per particle (within the list radius)
   int max_near;          // capacity of the per-step list of neighbours within h
   int lanes;             // CUDA lanes per particle in the pair stages: 32 (a warp), 16, 8 or 4 (the CPU: one)
+  int list_scan;         // lists: rebuilt by a scan of each particle's whole scene (1) or the cell walk (0)
   double max_list_bytes; // the lists may grow to this on overflow (0: what the backend has free)
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float skin_distance;   // list_radius - h: how far pairs may close in before the lists are stale (0: every step)
@@ -132,6 +133,7 @@ struct Scene {
 struct Arrays {
   Vec3 *pos, *vel, *pos_alt, *vel_alt;
   float *rho, *prs;
+  ForceTerms* terms;     // p / rho^2 and 1 / rho of every slot (the force pass's per-particle terms)
   int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
   uint32_t *keys, *keys_sorted;
   uint64_t *keys64, *keys64_sorted;  // a batch's segmented keys (several scenes)

@@ -38,8 +38,8 @@ class Pipeline {
   static size_t near_slots(const Model& m) { return Index::lists ? size_t(total_fluid(m)) * size_t(m.max_near) : 0; }
   static double bytes_needed(const Model& m) {
     const double n = total_fluid(m), cap = 2.0 * n;
-    const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + 2 * sizeof(uint32_t) +
-                            2 * sizeof(int);
+    const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + sizeof(ForceTerms) +
+                            2 * sizeof(uint32_t) + 2 * sizeof(int);
     const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int);
     const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
     const double cells = 2.0 * double(cells_per_scene(m)) * double(m.n_scenes) * sizeof(uint32_t);
@@ -63,6 +63,7 @@ class Pipeline {
     }
     rho_.resize(cap);
     prs_.resize(cap);
+    terms_.resize(cap);
     keys_.resize(cap);
     keys_sorted_.resize(cap);
     idx_.resize(cap);
@@ -350,6 +351,7 @@ class Pipeline {
             {"max_neighbors", double(m_.max_neighbors)},  // the list capacities now (they grow)
             {"max_near", double(m_.max_near)},
             {"lanes", double(m_.lanes)},  // CUDA lanes per particle in the pair stages
+            {"list_scan", double(m_.list_scan)},  // lists rebuilt by a scan of the scene (1) or the cells (0)
             {"die_angular_velocity_x", double(w[0])},
             {"die_angular_velocity_y", double(w[1])},
             {"die_angular_velocity_z", double(w[2])}};
@@ -366,6 +368,7 @@ class Pipeline {
     a.id_alt = id_[nxt].data();
     a.rho = rho_.data();
     a.prs = prs_.data();
+    a.terms = terms_.data();
     a.keys = keys_.data();
     a.keys_sorted = keys_sorted_.data();
     a.idx = idx_.data();
@@ -395,6 +398,7 @@ class Pipeline {
   Buf<Vec3> pos_[2], vel_[2];
   Buf<int> id_[2];
   Buf<float> rho_, prs_;
+  Buf<ForceTerms> terms_;
   Buf<uint32_t> keys_, keys_sorted_;
   Buf<int> idx_, perm_, ghost_of_, ghost_slot_;
   Buf<Vec3> x_build_;

@@ -265,8 +265,9 @@ struct PairWalk {
     NoVisit none;
     if constexpr (Index::lists) {
       int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
-      if (rebuilding(m, g)) count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
-      else count = a.nbr_count[i];
+      if (!rebuilding(m, g)) count = a.nbr_count[i];
+      else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
+      else count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
       int* near = a.near + size_t(i) * size_t(m.max_near);
       kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
                                           m.kern.h2, near, m.max_near);
@@ -275,6 +276,18 @@ struct PairWalk {
     } else {
       kept = count = all_pairs(m, g, grid, i, x, L, v);
     }
+  }
+  // the lists by a scan of i's whole scene (every fluid particle, then its ghosts) instead of
+  // the cell walk: the same neighbours within the list radius, in index order. For small
+  // scenes (h a good part of the container radius) the 27 cells around a particle hold most
+  // of its scene anyway, in many short cell ranges; the scan walks it in full rounds
+  template <class Lanes>
+  CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
+                               const Lanes& L, int* list) {
+    const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
+    const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, grid.spec.h2, list,
+                                      m.max_neighbors, 0);
+    return L.list_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, grid.spec.h2, list, m.max_neighbors, count);
   }
   // every fluid particle of i's scene, then its ghosts
   template <class Lanes, class V>
@@ -338,13 +351,16 @@ struct DensityStage {
     float cut = m.kern.box_fraction(P.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
     float rho = finish_density(P.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(P.sph, rho);
+    const ForceTerms t = ForceTerms::of(rho, p);
     a.rho[i] = rho;
     a.prs[i] = p;
+    a.terms[i] = t;
     // the ghost of this particle carries the same density and pressure
     int ghost = a.ghost_slot[i];
     if (ghost >= 0) {
       a.rho[ghost] = rho;
       a.prs[ghost] = p;
+      a.terms[ghost] = t;
     }
   }
 };
@@ -367,7 +383,7 @@ struct ForceStage {
     // the reduction of a step not taken is discarded; inactive slots are not reduced
     if (halted(gs) || (Many && i - sc * m.n_fluid >= gs->phys.n_active)) return;
     const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
-    ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.prs, i, S::fluid(m));
+    ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.terms, i, S::fluid(m));
     Vec3 x = a.pos[i];
     PairWalk<Index, Many>::forces(m, gs, a, S::grid(m, grid, sc), i, x, L, fv);
     fv.reduce(L);
