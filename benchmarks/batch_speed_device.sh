@@ -62,6 +62,6 @@ fi
 say "4. ncu: the longest batch launch"
 timeout 100 python3 benchmarks/ncu_top.py batch --out "$OUT" 2>&1 | tail -14 | tee -a "$log"
 say "5. gpu tests"
-timeout 120 python3 -m pytest -q -m gpu tests/test_m8_lanes.py tests/test_neighbor_reuse.py tests/test_batch_api.py \
+timeout 120 python3 -m pytest -q -m gpu tests/test_m8_variants.py tests/test_neighbor_reuse.py tests/test_batch_api.py \
   tests/test_neighbors.py -p no:cacheprovider 2>&1 | tee "$OUT/gpu_tests.log" | tail -15 | tee -a "$log"
 date -u +%Y-%m-%dT%H:%MZ | tee -a "$log"

@@ -45,6 +45,7 @@ inline Model build_model(const ParamSource& p) {
   if (!(m.skin_distance >= 0.0f)) throw Error("magic8ball: skin_distance must not be negative");
   m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
   if (m.lanes == 0) m.lanes = auto_lanes(m);
+  m.wide_keys = p.has("wide_keys") && p.integer("wide_keys") != 0 ? 1 : 0;
   m.list_scan = p.has("list_scan") ? int(p.integer("list_scan")) : -1;
   if (m.list_scan < 0) m.list_scan = auto_list_scan(m);
   if (m.list_scan > 1) throw Error("magic8ball: list_scan must be 0 (cells), 1 (scan) or -1 (automatic)");

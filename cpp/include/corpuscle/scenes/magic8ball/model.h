@@ -33,6 +33,7 @@ struct Model {
   int max_near;          // capacity of the per-step list of neighbours within h
   int lanes;             // CUDA lanes per particle in the pair stages: 32 (a warp), 16, 8 or 4 (the CPU: one)
   int list_scan;         // lists: rebuilt by a scan of each particle's whole scene (1) or the cell walk (0)
+  int wide_keys;         // a batch sorts 64-bit keys even where 32-bit ones hold them (a test's switch)
   double max_list_bytes; // the lists may grow to this on overflow (0: what the backend has free)
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float skin_distance;   // list_radius - h: how far pairs may close in before the lists are stale (0: every step)
@@ -137,6 +138,8 @@ struct Arrays {
   int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
   uint32_t *keys, *keys_sorted;
   uint64_t *keys64, *keys64_sorted;  // a batch's segmented keys (several scenes)
+  int key_low_bits;      // a batch's keys: 32-bit in keys / keys_sorted, the cell key in the low key_low_bits
+                         // (0: 64-bit in keys64 / keys64_sorted, the cell key in the low 32)
   int *idx, *perm;
   int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
   int *ghost_slot;       // sorted fluid index -> its ghost's slot, or -1 (kept between rebuilds)

@@ -44,8 +44,25 @@ class Pipeline {
     const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
     const double cells = 2.0 * double(cells_per_scene(m)) * double(m.n_scenes) * sizeof(uint32_t);
     const double sort_scratch = cap * (sizeof(uint32_t) + sizeof(int)) * 2.0;
-    const double batch = m.n_scenes > 1 ? cap * 2.0 * sizeof(uint64_t) + m.n_scenes * sizeof(StepSums) : 0.0;
+    const double batch = m.n_scenes > 1 ? (narrow_key_bits(m) ? 0.0 : cap * 2.0 * sizeof(uint64_t)) +
+                                              m.n_scenes * sizeof(StepSums)
+                                        : 0.0;
     return cap * per_slot + n * per_fluid + lists + cells + sort_scratch + batch;
+  }
+
+  // a batch's sort keys: the segment (layer and scene) above the cell key, or above a scene
+  // that keeps its order's slot index (below n_fluid); 32-bit keys when both fit in 32 bits
+  // (the low field's width returned), else 64-bit (0)
+  static int segment_bits(const Model& m) {
+    int b = 1;
+    while ((1LL << b) < 2LL * m.n_scenes) ++b;
+    return b;
+  }
+  static int narrow_key_bits(const Model& m) {
+    int low = 1;
+    while ((1LL << low) < (long long)m.n_fluid) ++low;
+    if (low < m.grid.key_bits()) low = m.grid.key_bits();
+    return !m.wide_keys && low + segment_bits(m) <= 32 ? low : 0;
   }
 
   CPS_KIND_TABLES(CPS_M8_FIELDS, CPS_M8_SCALARS, CPS_M8_CONTROLS, Scene, Control)
@@ -81,8 +98,11 @@ class Pipeline {
     cells_start_.resize(cells_per_scene(m) * size_t(m.n_scenes));
     cells_end_.resize(cells_per_scene(m) * size_t(m.n_scenes));
     if (m.n_scenes > 1) {
-      keys64_.resize(cap);
-      keys64_sorted_.resize(cap);
+      key_low_bits_ = narrow_key_bits(m);
+      if (!key_low_bits_) {
+        keys64_.resize(cap);
+        keys64_sorted_.resize(cap);
+      }
       scene_sums_.resize(m.n_scenes);
     }
   }
@@ -201,10 +221,12 @@ class Pipeline {
       ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{md, g},
                     ReorderStage<Many>{md, g, a});
     } else {
+      a.key_low_bits = key_low_bits_;
       ex_.for_each(cap, SelectKeysStage{md, g, a});
-      int seg_bits = 1;
-      while ((1 << seg_bits) < 2 * B) ++seg_bits;
-      ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + seg_bits);
+      if (key_low_bits_)
+        ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, key_low_bits_ + segment_bits(m));
+      else
+        ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + segment_bits(m));
       ex_.for_each(cap, ReorderStage<Many>{md, g, a});
     }
     ex_.mark(0);
@@ -387,6 +409,7 @@ class Pipeline {
     a.cell_end = cells_end_.data();
     a.keys64 = keys64_.data();
     a.keys64_sorted = keys64_sorted_.data();
+    a.key_low_bits = 0;
     return a;
   }
 
@@ -406,7 +429,8 @@ class Pipeline {
   Buf<StepSums> items_;
   Buf<int> nbr_, nbr_count_, near_, near_count_;
   Buf<uint32_t> cells_start_, cells_end_;
-  Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort
+  Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort (64-bit keys)
+  int key_low_bits_ = 0;                  // a batch's keys are 32-bit (narrow_key_bits), or 64-bit (0)
   Buf<StepSums> scene_sums_;              // a batch's per-scene reductions
   Buf<Vec3> cache_pos_, cache_vel_;       // a batch's reset cache (cache_scenes)
   Buf<int> cache_id_;

@@ -164,14 +164,17 @@ struct SelectKeysStage {
     const int layer = j < N ? 0 : 1;
     const int begin = layer * N + s * m.n_fluid;
     const uint32_t k = rebuilding(m, gs) && !halted(gs) ? a.keys[j] : uint32_t(j - begin);
-    a.keys64[j] = (uint64_t(layer * m.n_scenes + s) << 32) | uint64_t(k);
+    const uint32_t segment = uint32_t(layer * m.n_scenes + s);
+    if (a.key_low_bits) a.keys[j] = (segment << a.key_low_bits) | k;  // in place: this item's own key, read above
+    else a.keys64[j] = (uint64_t(segment) << 32) | uint64_t(k);
   }
 };
 
 // the sorted cell key of slot j (a batch's: the low half of its 64-bit key)
 template <bool Many>
 CPS_HD CPS_INLINE uint32_t sorted_key(const Arrays& a, int j) {
-  if constexpr (Many) return uint32_t(a.keys64_sorted[j]);
+  if constexpr (Many)
+    return a.key_low_bits ? a.keys_sorted[j] & ((1u << a.key_low_bits) - 1u) : uint32_t(a.keys64_sorted[j]);
   else return a.keys_sorted[j];
 }
 
