@@ -129,7 +129,7 @@ struct KeysStage {
 CPS_HD CPS_INLINE bool moved_too_far(const Model& m, const Scene* g) {
   if (!(m.skin_distance > 0.0f)) return true;  // no skin: every step
   const float a = fsqrt(bits_float(g->moved[0])), b = fsqrt(bits_float(g->moved[1]));
-  return a + fmax2(a, b) > m.skin_distance;
+  return !(a + fmax2(a, b) <= m.skin_distance);  // and when a displacement is not finite
 }
 // whether this step sorts, reorders and relists: a new state asked for it (rebuild[]), or the
 // last step's integration moved the scene too far for its lists (moved, kept from that
