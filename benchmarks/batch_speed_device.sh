@@ -7,6 +7,7 @@
 # each `corpuscle bench magic8ball --backend cuda --particles 1000 --batch 4096 --steps 100
 # --repeats 3`, then
 #   4. the single default scene (engine target >= 22,000 steps/s: auto keeps 32 lanes and cells),
+#      and the batch's stage profile at the defaults,
 #   5. Nsight Compute's full report of the longest batch launch (benchmarks/ncu_top.py),
 #   6. the gpu tests of the files this work touched.
 # Results in $OUT: speed.log (the summary), bench_*.json, build.log, ncu_batch_0.txt, gpu_tests.log.
@@ -59,6 +60,8 @@ done
 say "4. the single default scene (3,500 particles)"
 timeout 40 corpuscle bench magic8ball --backend cuda --steps 2000 --repeats 5 --no-progress --json "$OUT/bench_single.json" \
   2>&1 | tail -3 | tee -a "$log"
+say "4b. the batch's stage profile (defaults; ms per step over 20 eager steps)"
+timeout 60 python3 benchmarks/profile_kernels.py batch --profile --steps 20 2>&1 | tail -6 | tee -a "$log"
 say "5. ncu: the longest batch launch"
 timeout 100 python3 benchmarks/ncu_top.py batch --out "$OUT" 2>&1 | tail -14 | tee -a "$log"
 say "6. gpu tests"
