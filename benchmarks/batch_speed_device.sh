@@ -3,7 +3,7 @@
 # >= 5e8 particle-steps/s on the H200): build this tree with CUDA, then at the target size
 #   1. the lane widths of the pair passes (sph.lanes = 32, 16, 8; the default 0 gives 8 there),
 #   2. the list rebuild by cells against the scan (sph.list_build; auto scans at 1,000),
-#   3. the skin (sph.skin = 0.15, 0.3 against the default 0.2),
+#   3. the skin (sph.skin = 0.3 against the default 0.2),
 # each `corpuscle bench magic8ball --backend cuda --particles 1000 --batch 4096 --steps 100
 # --repeats 3`, then
 #   4. the single default scene (engine target >= 22,000 steps/s: auto keeps 32 lanes and cells),
@@ -53,7 +53,7 @@ say "fastest width: $W"
 say "2. list rebuild by the cells (the scan is the default at 1,000)"
 batch "cells" --set sph.lanes=$W --set sph.list_build=cells
 say "3. skin (sph.lanes = $W)"
-for s in 0.15 0.3; do
+for s in 0.3; do
   echo "-- sph.skin = $s" | tee -a "$log"
   batch "skin$s" --set sph.lanes=$W --set sph.skin=$s
 done
@@ -63,7 +63,7 @@ timeout 40 corpuscle bench magic8ball --backend cuda --steps 2000 --repeats 5 --
 say "4b. the batch's stage profile (defaults; ms per step over 20 eager steps)"
 timeout 60 python3 benchmarks/profile_kernels.py batch --profile --steps 20 2>&1 | tail -6 | tee -a "$log"
 say "5. ncu: the longest batch launch"
-timeout 100 python3 benchmarks/ncu_top.py batch --out "$OUT" 2>&1 | tail -14 | tee -a "$log"
+timeout 90 python3 benchmarks/ncu_top.py batch --out "$OUT" 2>&1 | tail -14 | tee -a "$log"
 say "6. gpu tests"
 timeout 120 python3 -m pytest -q -m gpu tests/test_m8_variants.py tests/test_neighbor_reuse.py tests/test_batch_api.py \
   tests/test_neighbors.py -p no:cacheprovider 2>&1 | tee "$OUT/gpu_tests.log" | tail -15 | tee -a "$log"
