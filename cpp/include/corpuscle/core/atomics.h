@@ -76,15 +76,16 @@ CPS_HD CPS_INLINE float bits_float(int b) {
 #endif
 }
 
-// *p = max(*p, v) for a running maximum that many threads raise and few raise further: on the
-// device the lanes of a warp that raise the same p combine first (one atomic per address a
-// warp, sm_80 and later: a scene's particles are contiguous, so mostly one per warp), and the
-// atomic is skipped where *p, as last seen, is already at least the value
+// *p = max(*p, v) for a running maximum that many threads raise and few raise further. On
+// the device (sm_80 and later) the lanes of a warp that raise the same p combine first and
+// one of them raises it (a scene's particles are contiguous, so mostly one atomic a warp,
+// fire-and-forget: no load of *p waits in the thread's path); before sm_80 each lane skips
+// the atomic where *p, as last seen, is already at least its value
 CPS_HD CPS_INLINE void atomic_max_above(int* p, int v) {
 #if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 800
   const unsigned peers = __match_any_sync(__activemask(), reinterpret_cast<unsigned long long>(p));
   const int m = __reduce_max_sync(peers, v);
-  if (int(threadIdx.x & 31u) == __ffs(int(peers)) - 1 && m > *static_cast<volatile int*>(p)) atomicMax(p, m);
+  if (int(threadIdx.x & 31u) == __ffs(int(peers)) - 1) atomicMax(p, m);
 #elif defined(__CUDA_ARCH__)
   if (v > *static_cast<volatile int*>(p)) atomicMax(p, v);
 #else

@@ -48,7 +48,8 @@ CPS_HD CPS_INLINE float finish_density(const SphParams& p, float kernel_sum) {
 //   dv_xsph = eps sum_{j fluid} m / rho_ij (v_j - v_i) W_poly6, rho_ij = (rho_i + rho_j) / 2
 //
 // The per-particle terms p / rho^2 and 1 / rho come precomputed (ForceTerms, written where the
-// density is), and 1 / r from one reciprocal square root: no division but XSPH's per pair.
+// density is), 1 / r from one reciprocal square root and the mass applied to the sums: no
+// division but XSPH's per pair.
 struct alignas(8) ForceTerms {
   float pterm;    // p / rho^2
   float inv_rho;  // 1 / rho
@@ -87,11 +88,11 @@ struct ForceVisitor {
     Vec<D> dv = vel[j] - vi;
     // symmetric pressure term
     float pterm = pterm_i + tj.pterm;
-    acc_p -= k.spiky_grad(d, r, rinv) * (p.mass * pterm);
-    // viscosity (the 1/rho_i factor is applied in finish())
-    acc_v += dv * (p.mass * k.visc_lap(r) * tj.inv_rho);
+    acc_p -= k.spiky_grad(d, r, rinv) * pterm;
+    // viscosity (the 1/rho_i factor is applied in acceleration())
+    acc_v += dv * (k.visc_lap(r) * tj.inv_rho);
     // XSPH velocity smoothing over fluid neighbours only
-    if (j < n_fluid) dv_xsph += dv * (p.mass * k.poly6(r2) * 2.0f / (rho_i + rho_j));
+    if (j < n_fluid) dv_xsph += dv * (k.poly6(r2) * 2.0f / (rho_i + rho_j));
   }
 
   // combine the partial sums of cooperating lanes
@@ -101,8 +102,9 @@ struct ForceVisitor {
     acc_v = L.sum(acc_v);
     dv_xsph = L.sum(dv_xsph);
   }
-  CPS_HD Vec<D> acceleration() const { return acc_p + acc_v * (p.viscosity / rho_i); }
-  CPS_HD Vec<D> xsph_correction() const { return dv_xsph * p.xsph; }
+  // (the particle mass, common to every pair, is applied once here)
+  CPS_HD Vec<D> acceleration() const { return (acc_p + acc_v * (p.viscosity / rho_i)) * p.mass; }
+  CPS_HD Vec<D> xsph_correction() const { return dv_xsph * (p.xsph * p.mass); }
 };
 
 }  // namespace cps
