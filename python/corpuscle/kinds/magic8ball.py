@@ -74,6 +74,12 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "sph.reference_particles": _K("int", 3500, "", 1, INT32_MAX, "particle count at which sph.h applies"),
     "sph.skin": _K("float", 0.2, "h", 0.0, 1.0,
                    "neighbour-list skin: lists reach h (1 + skin) and are reused until a particle moved too far; 0 rebuilds every step"),
+    "sph.lanes": _K("int", 0, "", 0, 32, "CUDA threads per particle in the density and force passes: a warp (32) "
+                    "or groups of 16, 8 or 4 of one; 0: chosen by the state's size (32 below 262,144 particles in all, "
+                    "8 from there; the CPU runs one)"),
+    "sph.list_build": _K("enum", "auto", "", doc="how the neighbour lists are rebuilt: cells (the 27 cells around "
+                         "each particle) or scan (every particle and ghost of its scene: cheaper for small scenes); "
+                         "auto: scan up to 1,500 particles a scene", choices=("auto", "cells", "scan")),
     "sph.max_list_memory": _K("float", 0.0, "MB", 0.0, 1e9,
                               "most memory the neighbour lists may grow to when they overflow; 0: what the backend has free"),
     # gravity
@@ -124,13 +130,20 @@ def _die_inside_container(values: dict[str, Any], arrays: dict[str, list[dict[st
             f"container.radius = {_fmt_value(radius)}"
         )
 
+def _lanes_width(values: dict[str, Any], arrays: dict[str, list[dict[str, Any]]]) -> None:
+    """sph.lanes is a width the CUDA pair passes have (or 0: automatic)."""
+    if values["sph.lanes"] not in (0, 4, 8, 16, 32):
+        raise SceneError(f"sph.lanes must be 0 (automatic), 4, 8, 16 or 32, got {_fmt_value(values['sph.lanes'])}")
+
+
 SCHEMA = SceneKind(
     name="magic8ball",
     description="3-D SPH fluid in a sphere with a rigid cube die (seed 001)",
     keys=MAGIC8BALL_KEYS,
     arrays={"shake": SHAKE_KEYS},
     required_in_arrays={"shake": ("start", "end")},
-    checks=[check_le("timestep.dt_min", "timestep.dt_max"), check_windows("shake"), _die_inside_container],
+    checks=[check_le("timestep.dt_min", "timestep.dt_max"), check_windows("shake"), _die_inside_container,
+            _lanes_width],
 )
 
 
@@ -226,16 +239,17 @@ class Magic8Ball(Kind):
             "shakes": [dict(start=s["start"], end=s["end"], acceleration=list(s["acceleration"]),
                             torque=list(s["torque"])) for s in scene.shakes],
         }
-        # neighbour lists reach h (1 + skin) and stand until a particle has moved skin h / 2
-        # (less the stretch of the mirror map, under which a ghost moves up to
-        # (2R - r) / r times as far as its particle at r >= R - h (1 + skin)); skin 0: every step
-        # (grid and allpairs search every step: no skin)
+        # neighbour lists reach h (1 + skin) and stand while no pair can have closed in by the
+        # skin: the core relists a scene once its largest fluid displacement a and ghost
+        # displacement b since the last rebuild reach a + max(a, b) > skin h (moved_too_far in
+        # scenes/magic8ball/stages.h); skin 0: every step (grid and allpairs search every
+        # step: no skin)
         skin = float(v["sph.skin"]) if target.index == "lists" else 0.0
         list_radius = h * (1.0 + skin)
-        r_min = max(radius - list_radius, 0.25 * radius)
-        stretch = (2.0 * radius - r_min) / r_min
         params["list_radius"] = list_radius
-        params["rebuild_distance"] = skin * h / (1.0 + stretch)
+        params["skin_distance"] = list_radius - h
+        params["lanes"] = int(v["sph.lanes"])
+        params["list_scan"] = {"auto": -1, "cells": 0, "scan": 1}[v["sph.list_build"]]
 
         # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
         # a few percent; a list that still overflows stops the run as unstable), in warp widths

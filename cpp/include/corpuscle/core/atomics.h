@@ -7,6 +7,8 @@
 // reproducible only where the data make that order irrelevant (integers, or gather-style
 // stages that need no atomics at all).
 #pragma once
+#include <cstring>
+
 #include "corpuscle/core/hd.h"
 
 namespace cps {
@@ -50,6 +52,44 @@ CPS_HD CPS_INLINE int atomic_max(int* p, int v) {
   while (expected < v && !__atomic_compare_exchange_n(p, &expected, v, true, __ATOMIC_RELAXED, __ATOMIC_RELAXED)) {
   }
   return expected;
+#endif
+}
+
+// the bits of a float as an int and back: non-negative floats (not NaN) order as their bits,
+// so atomic_max of the bits is the max of the values
+CPS_HD CPS_INLINE int float_bits(float x) {
+#ifdef __CUDA_ARCH__
+  return __float_as_int(x);
+#else
+  int b;
+  std::memcpy(&b, &x, sizeof b);
+  return b;
+#endif
+}
+CPS_HD CPS_INLINE float bits_float(int b) {
+#ifdef __CUDA_ARCH__
+  return __int_as_float(b);
+#else
+  float x;
+  std::memcpy(&x, &b, sizeof x);
+  return x;
+#endif
+}
+
+// *p = max(*p, v) for a running maximum that many threads raise and few raise further. On
+// the device (sm_80 and later) the lanes of a warp that raise the same p combine first and
+// one of them raises it (a scene's particles are contiguous, so mostly one atomic a warp,
+// fire-and-forget: no load of *p waits in the thread's path); before sm_80 each lane skips
+// the atomic where *p, as last seen, is already at least its value
+CPS_HD CPS_INLINE void atomic_max_above(int* p, int v) {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 800
+  const unsigned peers = __match_any_sync(__activemask(), reinterpret_cast<unsigned long long>(p));
+  const int m = __reduce_max_sync(peers, v);
+  if (int(threadIdx.x & 31u) == __ffs(int(peers)) - 1) atomicMax(p, m);
+#elif defined(__CUDA_ARCH__)
+  if (v > *static_cast<volatile int*>(p)) atomicMax(p, v);
+#else
+  atomic_max(p, v);  // loads first and stops there when *p >= v
 #endif
 }
 

@@ -22,6 +22,14 @@ CPS_HD CPS_INLINE float fsqrt(float x) {
   return __builtin_sqrtf(x);
 #endif
 }
+// 1 / sqrt(x): the device's reciprocal square root (within 2 ulp), the host's 1 / sqrt
+CPS_HD CPS_INLINE float frsqrt(float x) {
+#ifdef __CUDA_ARCH__
+  return ::rsqrtf(x);
+#else
+  return 1.0f / __builtin_sqrtf(x);
+#endif
+}
 CPS_HD CPS_INLINE float fpow(float x, float y) {
 #ifdef __CUDA_ARCH__
   return ::powf(x, y);

@@ -42,6 +42,20 @@ struct SingleLane {
     }
     return count;
   }
+  // list every j in [begin, end) closer than sqrt(r2max) to xi after the `count` already
+  // listed (up to cap), in index order; returns the new count (the true one, past cap)
+  template <int D>
+  CPS_HD int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list, int cap,
+                           int count) const {
+    for (int j = begin; j < end; ++j) {
+      Vec<D> d = xi - pos[j];
+      if (norm2(d) < r2max) {
+        if (count < cap) list[count] = j;
+        ++count;
+      }
+    }
+    return count;
+  }
   // visit the listed neighbours of xi
   template <int D, class Visitor>
   CPS_HD void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) const {
@@ -116,6 +130,28 @@ struct SubWarpLanes {
         if (hit) visit(j, d, r2);
       }
       count += __popc(group_ballot(hit));
+    }
+    return count;
+  }
+
+  // SingleLane::list_in_range: W candidates a round, hits listed in index order by a ballot
+  template <int D>
+  __device__ int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list,
+                               int cap, int count) const {
+    const unsigned below = (1u << lane()) - 1u;
+    for (int b = begin; b < end; b += W) {
+      const int j = b + lane();
+      bool hit = false;
+      if (j < end) {
+        Vec<D> d = xi - pos[j];
+        hit = norm2(d) < r2max;
+      }
+      const unsigned m = group_ballot(hit);
+      if (hit) {
+        const int at = count + __popc(m & below);
+        if (at < cap) list[at] = j;
+      }
+      count += __popc(m);
     }
     return count;
   }

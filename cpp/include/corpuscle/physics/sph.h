@@ -46,13 +46,23 @@ CPS_HD CPS_INLINE float finish_density(const SphParams& p, float kernel_sum) {
 //   a_p    = -sum_j m (p_i / rho_i^2 + p_j / rho_j^2) grad W_spiky      (symmetric: momentum-conserving)
 //   a_visc =  mu / rho_i sum_j m (v_j - v_i) / rho_j lap W_visc
 //   dv_xsph = eps sum_{j fluid} m / rho_ij (v_j - v_i) W_poly6, rho_ij = (rho_i + rho_j) / 2
+//
+// The per-particle terms p / rho^2 and 1 / rho come precomputed (ForceTerms, written where the
+// density is), 1 / r from one reciprocal square root and the mass applied to the sums: no
+// division but XSPH's per pair.
+struct alignas(8) ForceTerms {
+  float pterm;    // p / rho^2
+  float inv_rho;  // 1 / rho
+  CPS_HD static ForceTerms of(float rho, float p) { return ForceTerms{p / (rho * rho), 1.0f / rho}; }
+};
+
 template <int D>
 struct ForceVisitor {
   const SphKernels<D>& k;
   const SphParams& p;
   const Vec<D>* vel;
   const float* rho;
-  const float* prs;
+  const ForceTerms* terms;
   int i;
   int n_fluid;  // indices below are fluid, the rest ghosts (XSPH ignores ghosts)
   Vec<D> vi;
@@ -62,25 +72,27 @@ struct ForceVisitor {
   Vec<D> dv_xsph = Vec<D>::zero();
 
   CPS_HD ForceVisitor(const SphKernels<D>& k_, const SphParams& p_, const Vec<D>* vel_, const float* rho_,
-                      const float* prs_, int i_, int n_fluid_)
-      : k(k_), p(p_), vel(vel_), rho(rho_), prs(prs_), i(i_), n_fluid(n_fluid_) {
+                      const ForceTerms* terms_, int i_, int n_fluid_)
+      : k(k_), p(p_), vel(vel_), rho(rho_), terms(terms_), i(i_), n_fluid(n_fluid_) {
     vi = vel[i];
     rho_i = rho[i];
-    pterm_i = prs[i] / (rho_i * rho_i);
+    pterm_i = terms[i].pterm;
   }
 
   CPS_HD void operator()(int j, const Vec<D>& d, float r2) {
     if (j == i) return;
-    float r = fsqrt(r2);
-    float rho_j = rho[j];
+    const float rinv = r2 > 0.0f ? frsqrt(r2) : 0.0f;
+    const float r = r2 * rinv;
+    const float rho_j = rho[j];
+    const ForceTerms tj = terms[j];
     Vec<D> dv = vel[j] - vi;
     // symmetric pressure term
-    float pterm = pterm_i + prs[j] / (rho_j * rho_j);
-    acc_p -= k.spiky_grad(d, r) * (p.mass * pterm);
-    // viscosity (the 1/rho_i factor is applied in finish())
-    acc_v += dv * (p.mass * k.visc_lap(r) / rho_j);
+    float pterm = pterm_i + tj.pterm;
+    acc_p -= k.spiky_grad(d, r, rinv) * pterm;
+    // viscosity (the 1/rho_i factor is applied in acceleration())
+    acc_v += dv * (k.visc_lap(r) * tj.inv_rho);
     // XSPH velocity smoothing over fluid neighbours only
-    if (j < n_fluid) dv_xsph += dv * (p.mass * k.poly6(r2) * 2.0f / (rho_i + rho_j));
+    if (j < n_fluid) dv_xsph += dv * (k.poly6(r2) * 2.0f / (rho_i + rho_j));
   }
 
   // combine the partial sums of cooperating lanes
@@ -90,8 +102,9 @@ struct ForceVisitor {
     acc_v = L.sum(acc_v);
     dv_xsph = L.sum(dv_xsph);
   }
-  CPS_HD Vec<D> acceleration() const { return acc_p + acc_v * (p.viscosity / rho_i); }
-  CPS_HD Vec<D> xsph_correction() const { return dv_xsph * p.xsph; }
+  // (the particle mass, common to every pair, is applied once here)
+  CPS_HD Vec<D> acceleration() const { return (acc_p + acc_v * (p.viscosity / rho_i)) * p.mass; }
+  CPS_HD Vec<D> xsph_correction() const { return dv_xsph * (p.xsph * p.mass); }
 };
 
 }  // namespace cps

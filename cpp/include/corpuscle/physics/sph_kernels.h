@@ -44,6 +44,12 @@ struct SphKernels {
     float t = h - r;
     return d * (-spiky_c * t * t / r);
   }
+  // the same with 1 / r given (no division)
+  CPS_HD Vec<D> spiky_grad(const Vec<D>& d, float r, float rinv) const {
+    if (r >= h || r <= 0.0f) return Vec<D>::zero();
+    float t = h - r;
+    return d * (-spiky_c * t * t * rinv);
+  }
   // fraction of the Poly6 kernel's mass beyond a plane at signed distance d from the particle
   // (d > 0: plane outside the particle), 3-D: Gamma(s) = 1/2 - 315/256 F(s), s = d/h, with
   // F(s) = s - 4 s^3/3 + 6 s^5/5 - 4 s^7/7 + s^9/9 the antiderivative of (1 - s^2)^4

@@ -98,6 +98,7 @@ struct RestoreRecordStage {
     // the next step sorts and relists this scene (as a restored state's first step does)
     r.rebuild[0] = r.rebuild[1] = 0;
     r.rebuild[r.clock.step & 1] = 1;
+    r.moved[0] = r.moved[1] = 0;
     r.pending = r.sums;
     r.step_dt = 0.0f;
     g[t.scene] = r;

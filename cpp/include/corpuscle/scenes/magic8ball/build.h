@@ -12,6 +12,23 @@
 
 namespace cps::m8 {
 
+// CUDA lanes per particle in the pair stages when the scene does not say (sph.lanes = 0): a
+// warp each for states that need them to fill the GPU (one scene of a few thousand particles:
+// 32 lanes per particle is what keeps the device busy); kWideLanes for states of at least
+// kWideParticles (a large batch), where narrower groups waste less of a warp's last round
+// over ~130-230 neighbours, reduce in fewer shuffles and share the per-particle tail (run by
+// one lane of each group). Not yet measured against 32: benchmarks/batch_speed_device.sh.
+constexpr int kWideLanes = 8;
+constexpr long long kWideParticles = 1LL << 18;
+inline int auto_lanes(const Model& m) {
+  return (long long)m.n_fluid * m.n_scenes >= kWideParticles ? kWideLanes : 32;
+}
+// how the lists are rebuilt when the scene does not say (sph.list_build = auto): a scan of the
+// whole scene for scenes of at most kScanSlots particle slots (where the 27 cells around a
+// particle hold most of its scene anyway), the cell walk for larger ones
+constexpr int kScanSlots = 1500;
+inline int auto_list_scan(const Model& m) { return m.n_fluid <= kScanSlots ? 1 : 0; }
+
 inline Model build_model(const ParamSource& p) {
   Model m{};
   m.n_fluid = int(p.integer("n_fluid"));
@@ -24,7 +41,17 @@ inline Model build_model(const ParamSource& p) {
   m.max_near = int(p.integer("max_near"));
   m.max_list_bytes = p.has("max_list_bytes") ? p.number("max_list_bytes") : 0.0;
   m.list_radius = p.f("list_radius");
-  m.rebuild_disp2 = p.f("rebuild_distance") * p.f("rebuild_distance");
+  m.skin_distance = p.f("skin_distance");
+  if (!(m.skin_distance >= 0.0f)) throw Error("magic8ball: skin_distance must not be negative");
+  m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
+  if (m.lanes == 0) m.lanes = auto_lanes(m);
+  m.wide_keys = p.has("wide_keys") && p.integer("wide_keys") != 0 ? 1 : 0;
+  m.list_scan = p.has("list_scan") ? int(p.integer("list_scan")) : -1;
+  if (m.list_scan < 0) m.list_scan = auto_list_scan(m);
+  if (m.list_scan > 1) throw Error("magic8ball: list_scan must be 0 (cells), 1 (scan) or -1 (automatic)");
+  if (m.lanes != 4 && m.lanes != 8 && m.lanes != 16 && m.lanes != 32)
+    throw Error("magic8ball: lanes must be 4, 8, 16 or 32 (0: chosen by the state's size), got " +
+                std::to_string(m.lanes));
   m.wall = SphereWall{p.f("radius"), p.f("wall_restitution"), p.f("wall_friction")};
   m.shell_inertia = p.f("shell_inertia");
   m.spin_damping = p.f("spin_damping");

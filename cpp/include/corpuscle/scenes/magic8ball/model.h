@@ -31,9 +31,12 @@ struct Model {
   int n_scenes;          // independent scenes of the same model in one state (1: a single run)
   int max_neighbors;     // neighbour list capacity per particle (within the list radius)
   int max_near;          // capacity of the per-step list of neighbours within h
+  int lanes;             // CUDA lanes per particle in the pair stages: 32 (a warp), 16, 8 or 4 (the CPU: one)
+  int list_scan;         // lists: rebuilt by a scan of each particle's whole scene (1) or the cell walk (0)
+  int wide_keys;         // a batch sorts 64-bit keys even where 32-bit ones hold them (a test's switch)
   double max_list_bytes; // the lists may grow to this on overflow (0: what the backend has free)
   float list_radius;     // neighbour lists and cells: h (1 + skin)
-  float rebuild_disp2;   // rebuild once a particle moved this far (squared) since the last one
+  float skin_distance;   // list_radius - h: how far pairs may close in before the lists are stale (0: every step)
   float h;               // smoothing length
   SphKernels<D> kern;
   SphereWall wall;
@@ -120,7 +123,10 @@ struct Scene {
   FrameMotion frame;     // this step's container-frame terms
   StepSums pending;      // this step's reductions, kept in sums once the step is taken
   float step_dt;         // the dt this step integrates with (0: the step is not taken)
-  int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (raised by step s - 1)
+  int rebuild[2];        // sort and relist in step s when rebuild[s & 1] (a new state: raised before step s)
+  int moved[2];          // since the last rebuild: the largest squared displacement of a fluid particle
+                         // ([0]) and of a ghost that matters ([1]), as float bits (measured by the
+                         // integration; see moved_too_far)
   int n_ghost;           // ghost particles of the last rebuild
 };
 
@@ -128,9 +134,12 @@ struct Scene {
 struct Arrays {
   Vec3 *pos, *vel, *pos_alt, *vel_alt;
   float *rho, *prs;
+  ForceTerms* terms;     // p / rho^2 and 1 / rho of every slot (the force pass's per-particle terms)
   int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
   uint32_t *keys, *keys_sorted;
   uint64_t *keys64, *keys64_sorted;  // a batch's segmented keys (several scenes)
+  int key_low_bits;      // a batch's keys: 32-bit in keys / keys_sorted, the cell key in the low key_low_bits
+                         // (0: 64-bit in keys64 / keys64_sorted, the cell key in the low 32)
   int *idx, *perm;
   int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
   int *ghost_slot;       // sorted fluid index -> its ghost's slot, or -1 (kept between rebuilds)

@@ -38,14 +38,31 @@ class Pipeline {
   static size_t near_slots(const Model& m) { return Index::lists ? size_t(total_fluid(m)) * size_t(m.max_near) : 0; }
   static double bytes_needed(const Model& m) {
     const double n = total_fluid(m), cap = 2.0 * n;
-    const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + 2 * sizeof(uint32_t) +
-                            2 * sizeof(int);
+    const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + sizeof(ForceTerms) +
+                            2 * sizeof(uint32_t) + 2 * sizeof(int);
     const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int);
     const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
     const double cells = 2.0 * double(cells_per_scene(m)) * double(m.n_scenes) * sizeof(uint32_t);
     const double sort_scratch = cap * (sizeof(uint32_t) + sizeof(int)) * 2.0;
-    const double batch = m.n_scenes > 1 ? cap * 2.0 * sizeof(uint64_t) + m.n_scenes * sizeof(StepSums) : 0.0;
+    const double batch = m.n_scenes > 1 ? (narrow_key_bits(m) ? 0.0 : cap * 2.0 * sizeof(uint64_t)) +
+                                              m.n_scenes * sizeof(StepSums)
+                                        : 0.0;
     return cap * per_slot + n * per_fluid + lists + cells + sort_scratch + batch;
+  }
+
+  // a batch's sort keys: the segment (layer and scene) above the cell key, or above a scene
+  // that keeps its order's slot index (below n_fluid); 32-bit keys when both fit in 32 bits
+  // (the low field's width returned), else 64-bit (0)
+  static int segment_bits(const Model& m) {
+    int b = 1;
+    while ((1LL << b) < 2LL * m.n_scenes) ++b;
+    return b;
+  }
+  static int narrow_key_bits(const Model& m) {
+    int low = 1;
+    while ((1LL << low) < (long long)m.n_fluid) ++low;
+    if (low < m.grid.key_bits()) low = m.grid.key_bits();
+    return !m.wide_keys && low + segment_bits(m) <= 32 ? low : 0;
   }
 
   CPS_KIND_TABLES(CPS_M8_FIELDS, CPS_M8_SCALARS, CPS_M8_CONTROLS, Scene, Control)
@@ -63,6 +80,7 @@ class Pipeline {
     }
     rho_.resize(cap);
     prs_.resize(cap);
+    terms_.resize(cap);
     keys_.resize(cap);
     keys_sorted_.resize(cap);
     idx_.resize(cap);
@@ -80,8 +98,11 @@ class Pipeline {
     cells_start_.resize(cells_per_scene(m) * size_t(m.n_scenes));
     cells_end_.resize(cells_per_scene(m) * size_t(m.n_scenes));
     if (m.n_scenes > 1) {
-      keys64_.resize(cap);
-      keys64_sorted_.resize(cap);
+      key_low_bits_ = narrow_key_bits(m);
+      if (!key_low_bits_) {
+        keys64_.resize(cap);
+        keys64_sorted_.resize(cap);
+      }
       scene_sums_.resize(m.n_scenes);
     }
   }
@@ -148,6 +169,7 @@ class Pipeline {
   // a restored record: its scratch starts clean (the first step sorts and relists)
   static void restored(Scene& r) {
     r.rebuild[0] = r.rebuild[1] = 0;
+    r.moved[0] = r.moved[1] = 0;
     r.pending = r.sums;
     r.step_dt = 0.0f;
   }
@@ -196,13 +218,15 @@ class Pipeline {
     //    there, cell ranges) or carry the arrays over; a batch sorts every scene's segments
     //    at once, each scene that does not rebuild keeping its order
     if constexpr (!Many) {
-      ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{g},
+      ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{md, g},
                     ReorderStage<Many>{md, g, a});
     } else {
+      a.key_low_bits = key_low_bits_;
       ex_.for_each(cap, SelectKeysStage{md, g, a});
-      int seg_bits = 1;
-      while ((1 << seg_bits) < 2 * B) ++seg_bits;
-      ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + seg_bits);
+      if (key_low_bits_)
+        ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, key_low_bits_ + segment_bits(m));
+      else
+        ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + segment_bits(m));
       ex_.for_each(cap, ReorderStage<Many>{md, g, a});
     }
     ex_.mark(0);
@@ -210,15 +234,20 @@ class Pipeline {
     Arrays s = arrays(nxt, cur);
     GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
     // 3. density and pressure (and the neighbour lists); the container frame of this step
-    ex_.for_each_lanes(n, DensityStage<Index, Many>{md, g, u_, s, grid});
+    for_each_pair_lanes(n, DensityStage<Index, Many>{md, g, u_, s, grid});
     ex_.mark(1);
     // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
       if constexpr (!Many) {
-        ex_.for_each_lanes_reduce_then(n, ForceStage<Index, Many>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
-                                       StepSums::identity(), FinalizeStage{md, g});
+        if (m.lanes == 32) {
+          ex_.for_each_lanes_reduce_then(n, ForceStage<Index, Many>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
+                                         StepSums::identity(), FinalizeStage{md, g});
+        } else {
+          for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+          ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
+        }
       } else {
-        ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+        for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
         reduce_scenes(ex_, B, SceneReduceStage{md, g, s.items, scene_sums_.data()});
         ex_.for_each(B, FinalizeStage{md, g, scene_sums_.data()});
       }
@@ -227,7 +256,7 @@ class Pipeline {
       ex_.for_each(keys_items(m), IntegrateStage<Many>{md, g, s});
       ex_.mark(3);
     } else {
-      ex_.for_each_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+      for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
       if constexpr (!Many) {
         ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
       } else {
@@ -235,6 +264,18 @@ class Pipeline {
         ex_.for_each(B, StoreSumsStage{g, scene_sums_.data()});
       }
       ex_.mark(2);
+    }
+  }
+
+  // a pair stage with the model's lanes per particle (CUDA: a warp, or groups of 16, 8 or 4
+  // lanes of one; the CPU runs one lane whatever the width)
+  template <class F>
+  void for_each_pair_lanes(int n, const F& f) {
+    switch (m_.lanes) {
+      case 4: ex_.template for_each_lanes_w<4>(n, f); break;
+      case 8: ex_.template for_each_lanes_w<8>(n, f); break;
+      case 16: ex_.template for_each_lanes_w<16>(n, f); break;
+      default: ex_.for_each_lanes(n, f); break;
     }
   }
 
@@ -331,6 +372,8 @@ class Pipeline {
             {"mean_density", double(r.sums.rho_sum) / double(r.phys.n_active)},
             {"max_neighbors", double(m_.max_neighbors)},  // the list capacities now (they grow)
             {"max_near", double(m_.max_near)},
+            {"lanes", double(m_.lanes)},  // CUDA lanes per particle in the pair stages
+            {"list_scan", double(m_.list_scan)},  // lists rebuilt by a scan of the scene (1) or the cells (0)
             {"die_angular_velocity_x", double(w[0])},
             {"die_angular_velocity_y", double(w[1])},
             {"die_angular_velocity_z", double(w[2])}};
@@ -347,6 +390,7 @@ class Pipeline {
     a.id_alt = id_[nxt].data();
     a.rho = rho_.data();
     a.prs = prs_.data();
+    a.terms = terms_.data();
     a.keys = keys_.data();
     a.keys_sorted = keys_sorted_.data();
     a.idx = idx_.data();
@@ -365,6 +409,7 @@ class Pipeline {
     a.cell_end = cells_end_.data();
     a.keys64 = keys64_.data();
     a.keys64_sorted = keys64_sorted_.data();
+    a.key_low_bits = 0;
     return a;
   }
 
@@ -376,6 +421,7 @@ class Pipeline {
   Buf<Vec3> pos_[2], vel_[2];
   Buf<int> id_[2];
   Buf<float> rho_, prs_;
+  Buf<ForceTerms> terms_;
   Buf<uint32_t> keys_, keys_sorted_;
   Buf<int> idx_, perm_, ghost_of_, ghost_slot_;
   Buf<Vec3> x_build_;
@@ -383,7 +429,8 @@ class Pipeline {
   Buf<StepSums> items_;
   Buf<int> nbr_, nbr_count_, near_, near_count_;
   Buf<uint32_t> cells_start_, cells_end_;
-  Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort
+  Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort (64-bit keys)
+  int key_low_bits_ = 0;                  // a batch's keys are 32-bit (narrow_key_bits), or 64-bit (0)
   Buf<StepSums> scene_sums_;              // a batch's per-scene reductions
   Buf<Vec3> cache_pos_, cache_vel_;       // a batch's reset cache (cache_scenes)
   Buf<int> cache_id_;

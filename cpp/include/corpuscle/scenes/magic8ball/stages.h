@@ -1,6 +1,7 @@
 // The Magic 8-Ball's stages: each a functor run by a backend's parallel_for over the
 // particles (or one item per scene). Nothing here knows which backend runs it.
 #pragma once
+#include "corpuscle/core/atomics.h"
 #include "corpuscle/core/lanes.h"
 #include "corpuscle/scenes/magic8ball/model.h"
 
@@ -17,9 +18,6 @@ CPS_HD CPS_INLINE void control_at(const Model& m, const Control& u, double t, Ve
     }
   }
 }
-
-// raise a flag from many threads: the largest code wins, whatever the order
-CPS_HD CPS_INLINE void raise_flag(int* p, int code) { atomic_max(p, code); }
 
 // A state holds n_scenes independent scenes of n_fluid particles each. Slots: the fluid of
 // scene s in [s n, (s + 1) n), its ghost slots in [N + s n, N + (s + 1) n) (N = all fluid);
@@ -117,13 +115,39 @@ struct KeysStage {
   }
 };
 
-// whether this step sorts, reorders and relists (the rest of the time the order and the
-// neighbour lists of the last rebuild stand: nothing moved more than the skin allows)
-CPS_HD CPS_INLINE bool rebuilding(const Scene* g) { return g->rebuild[g->clock.step & 1] != 0; }
+// Whether the lists of the last rebuild may miss a pair within h now. They hold every pair
+// that was within the list radius h + s (s = skin_distance) then; a pair's distance shrinks
+// by at most the sum of its two points' displacements since. With a the largest fluid
+// displacement of the scene and b the largest of its ghosts that matter, every pair closed in
+// by at most a + max(a, b) (fluid-fluid: 2a; fluid-ghost: a + b; ghosts pair with fluid only),
+// so the lists stand while a + max(a, b) <= s. A ghost is measured exactly (its particle's
+// mirror image now against the one at the rebuild: the mirror map stretches tangential
+// motion by (2R - r) / r), and only while its particle is within 1.001 h of the wall: a ghost
+// at 2R - r is at least R - r from all fluid (which stays within R), so beyond that it meets
+// no fluid within h. A particle without a ghost since the rebuild started further than h + s
+// from the wall, moved at most a <= s / 2, so its missing image is further than h from all fluid.
+CPS_HD CPS_INLINE bool moved_too_far(const Model& m, const Scene* g) {
+  if (!(m.skin_distance > 0.0f)) return true;  // no skin: every step
+  const float a = fsqrt(bits_float(g->moved[0])), b = fsqrt(bits_float(g->moved[1]));
+  return !(a + fmax2(a, b) <= m.skin_distance);  // and when a displacement is not finite
+}
+// whether this step sorts, reorders and relists: a new state asked for it (rebuild[]), or the
+// last step's integration moved the scene too far for its lists (moved, kept from that
+// integration until this step's finalize); the rest of the time the order and the lists of
+// the last rebuild stand
+CPS_HD CPS_INLINE bool rebuilding(const Model& m, const Scene* g) {
+  return g->rebuild[g->clock.step & 1] != 0 || moved_too_far(m, g);
+}
+// the ghost of a particle at x can meet fluid within h (see moved_too_far)
+CPS_HD CPS_INLINE bool ghost_matters(const Model& m, const Vec3& x) {
+  const float inner = m.wall.radius - 1.001f * m.h;
+  return !(inner > 0.0f) || norm2(x) > inner * inner;
+}
 
 struct RebuildFlag {
+  const Model* model;
   const Scene* g;
-  CPS_HD bool operator()() const { return rebuilding(g); }
+  CPS_HD bool operator()() const { return rebuilding(*model, g); }
 };
 
 // a batch of several scenes sorts 64-bit keys: the segment (fluid or ghosts of one scene)
@@ -139,15 +163,18 @@ struct SelectKeysStage {
     const Scene* gs = g + s;
     const int layer = j < N ? 0 : 1;
     const int begin = layer * N + s * m.n_fluid;
-    const uint32_t k = rebuilding(gs) && !halted(gs) ? a.keys[j] : uint32_t(j - begin);
-    a.keys64[j] = (uint64_t(layer * m.n_scenes + s) << 32) | uint64_t(k);
+    const uint32_t k = rebuilding(m, gs) && !halted(gs) ? a.keys[j] : uint32_t(j - begin);
+    const uint32_t segment = uint32_t(layer * m.n_scenes + s);
+    if (a.key_low_bits) a.keys[j] = (segment << a.key_low_bits) | k;  // in place: this item's own key, read above
+    else a.keys64[j] = (uint64_t(segment) << 32) | uint64_t(k);
   }
 };
 
 // the sorted cell key of slot j (a batch's: the low half of its 64-bit key)
 template <bool Many>
 CPS_HD CPS_INLINE uint32_t sorted_key(const Arrays& a, int j) {
-  if constexpr (Many) return uint32_t(a.keys64_sorted[j]);
+  if constexpr (Many)
+    return a.key_low_bits ? a.keys_sorted[j] & ((1u << a.key_low_bits) - 1u) : uint32_t(a.keys64_sorted[j]);
   else return a.keys_sorted[j];
 }
 
@@ -165,7 +192,7 @@ struct ReorderStage {
     Scene* gs = g + s;
     const bool fluid = j < N;
     const int begin = (fluid ? 0 : N) + s * n, end = begin + n;  // this slot's segment
-    if (!rebuilding(gs) || halted(gs)) {
+    if (!rebuilding(m, gs) || halted(gs)) {
       if (fluid || j - begin < gs->n_ghost) {
         a.pos_alt[j] = a.pos[j];
         a.vel_alt[j] = a.vel[j];
@@ -241,8 +268,9 @@ struct PairWalk {
     NoVisit none;
     if constexpr (Index::lists) {
       int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
-      if (rebuilding(g)) count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
-      else count = a.nbr_count[i];
+      if (!rebuilding(m, g)) count = a.nbr_count[i];
+      else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
+      else count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
       int* near = a.near + size_t(i) * size_t(m.max_near);
       kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
                                           m.kern.h2, near, m.max_near);
@@ -251,6 +279,18 @@ struct PairWalk {
     } else {
       kept = count = all_pairs(m, g, grid, i, x, L, v);
     }
+  }
+  // the lists by a scan of i's whole scene (every fluid particle, then its ghosts) instead of
+  // the cell walk: the same neighbours within the list radius, in index order. For small
+  // scenes (h a good part of the container radius) the 27 cells around a particle hold most
+  // of its scene anyway, in many short cell ranges; the scan walks it in full rounds
+  template <class Lanes>
+  CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
+                               const Lanes& L, int* list) {
+    const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
+    const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, grid.spec.h2, list,
+                                      m.max_neighbors, 0);
+    return L.list_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, grid.spec.h2, list, m.max_neighbors, count);
   }
   // every fluid particle of i's scene, then its ghosts
   template <class Lanes, class V>
@@ -299,7 +339,7 @@ struct DensityStage {
     const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    const bool rebuild = rebuilding(gs);
+    const bool rebuild = rebuilding(m, gs);
     int count = 0, kept = 0;
     PairWalk<Index, Many>::density(m, gs, a, S::grid(m, grid, s), i, x, L, v, count, kept);
     float sum = L.sum(v.sum);
@@ -314,13 +354,16 @@ struct DensityStage {
     float cut = m.kern.box_fraction(P.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
     float rho = finish_density(P.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(P.sph, rho);
+    const ForceTerms t = ForceTerms::of(rho, p);
     a.rho[i] = rho;
     a.prs[i] = p;
+    a.terms[i] = t;
     // the ghost of this particle carries the same density and pressure
     int ghost = a.ghost_slot[i];
     if (ghost >= 0) {
       a.rho[ghost] = rho;
       a.prs[ghost] = p;
+      a.terms[ghost] = t;
     }
   }
 };
@@ -343,7 +386,7 @@ struct ForceStage {
     // the reduction of a step not taken is discarded; inactive slots are not reduced
     if (halted(gs) || (Many && i - sc * m.n_fluid >= gs->phys.n_active)) return;
     const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
-    ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.prs, i, S::fluid(m));
+    ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.terms, i, S::fluid(m));
     Vec3 x = a.pos[i];
     PairWalk<Index, Many>::forces(m, gs, a, S::grid(m, grid, sc), i, x, L, fv);
     fv.reduce(L);
@@ -446,8 +489,9 @@ struct FinalizeStage {
       G.step_dt = 0.0f;
       return;
     }
-    G.rebuilds += G.rebuild[C.step & 1];
+    G.rebuilds += rebuilding(m, &G) ? 1 : 0;
     G.rebuild[C.step & 1] = 0;  // this step's readers are done with its flag
+    G.moved[0] = G.moved[1] = 0;  // and with the displacements: this step's integration measures them anew
     const StepSums& S = sums ? sums[scene] : G.pending;
     bool last;
     const float dt = clip_to_end(C, sums_dt(m, G.phys, S, G.die), last);
@@ -511,13 +555,17 @@ struct IntegrateStage {
       a.pos[i] = x;
       a.vel[i] = v;
       // the ghost follows its particle between rebuilds
+      const Vec3 xb = a.x_build[i];
       int ghost = a.ghost_slot[i];
       if (ghost >= 0) {
-        a.pos[ghost] = mirror_position(m.wall, x);
+        const Vec3 xg = mirror_position(m.wall, x);
+        a.pos[ghost] = xg;
         a.vel[ghost] = mirror_velocity(x, v);
+        if (ghost_matters(m, x)) atomic_max_above(&gs->moved[1], float_bits(norm2(xg - mirror_position(m.wall, xb))));
       }
-      // moved too far for the lists: the next step rebuilds (the clock is already the next)
-      if (norm2(x - a.x_build[i]) > m.rebuild_disp2) raise_flag(&gs->rebuild[gs->clock.step & 1], 1);
+      // how far it moved since the last rebuild: the next step relists when the scene moved
+      // too far for its lists (moved_too_far)
+      atomic_max_above(&gs->moved[0], float_bits(norm2(x - xb)));
     }
     start_step(m, a, i, &x, active);
   }
