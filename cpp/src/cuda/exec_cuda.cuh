@@ -288,6 +288,20 @@ struct CudaExec {
     CPS_CUDA_LAUNCH_CHECK();
   }
 
+  // for_each(n, f) with bytes_per_thread of the block's dynamic shared memory for each of its
+  // threads (a traversal stack: spatial/lbvh.h's lbvh_shared_stack finds its slice and its
+  // size from the launch); more than 48 KiB a block is requested from the device
+  template <class F>
+  void for_each_shared(int n, const F& f, size_t bytes_per_thread) {
+    activate();
+    if (n <= 0) return;
+    const size_t bytes = bytes_per_thread * size_t(kBlock);
+    if (bytes > 48 * 1024)
+      CPS_CUDA_CHECK(cudaFuncSetAttribute(k_for_each<F>, cudaFuncAttributeMaxDynamicSharedMemorySize, int(bytes)));
+    k_for_each<<<(n + kBlock - 1) / kBlock, kBlock, bytes, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
   template <class F>
   void for_each_lanes(int n, const F& f) {
     activate();

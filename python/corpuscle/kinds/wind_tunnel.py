@@ -35,8 +35,12 @@ MAX_PITCH = 45.0
 
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
 
+# the LBVH traversal stack (entries per thread; shared memory on CUDA): the default and the most
+LBVH_STACK, LBVH_MAX_STACK = 32, 128
+
 UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)",
-                    2: "an LBVH traversal stack would have overflowed (the tree is deeper than 64 levels)"}
+                    2: "an LBVH traversal needed more stack than lbvh.stack entries (--neighbors lbvh: raise "
+                       f"lbvh.stack, at most {LBVH_MAX_STACK}; the step was not taken)"}
 
 INTEGRATORS = {"forward-euler": 0, "symplectic-euler": 1}
 CONTACT_FORMS = {"gather": 0, "reflexive": 1, "reflexive-warp": 2}
@@ -105,6 +109,9 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "grid.cell": _K("float", 0.0, "m", 0.0, 1e3,
                     "cell edge of the broad-phase grid, at least a contact diameter (0: about one cell per "
                     "particle, sqrt(free area / N))"),
+    "lbvh.stack": _K("int", LBVH_STACK, "", 1, LBVH_MAX_STACK,
+                     "traversal stack entries per thread of the LBVH (--neighbors lbvh; CUDA keeps them in shared "
+                     "memory: 512 bytes a block per entry); a walk that needs more stops the run"),
     "measure.block_time": _K("float", 0.0, "s", 0.0, 1e6,
                              "initial averaging block length; 0: the steady part / 64 (blocks double as needed)"),
 }
@@ -286,7 +293,7 @@ class WindTunnel(Kind):
             "reflexive": CONTACT_FORMS[v["contact.form"]], "dt_fraction": float(v["timestep.fraction"]),
             # about one cell per particle: at 2,097,152 particles on the H200 2,574 steps/s
             # against 1,846 with cells of one contact diameter (most of them empty, 2026-12-01)
-            "cell": float(v["grid.cell"]) or math.sqrt(free_area / n),
+            "cell": float(v["grid.cell"]) or math.sqrt(free_area / n), "lbvh_stack": int(v["lbvh.stack"]),
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }

@@ -39,6 +39,7 @@ struct Model {
   float speed;           // free-stream speed U (along +x)
   float thermal;         // per-component thermal velocity spread / U (0: the seed's cold beam)
   float cell;            // the broad-phase grid's cell edge (m), at least a contact diameter
+  int lbvh_stack;        // LBVH traversal stack entries per thread (shared memory on the device)
   float dt_fraction;     // the fastest particle moves at most this fraction of the radius per step
   float dt_max;
   Vec2 quarter_chord;    // moment reference point

@@ -139,16 +139,21 @@ class Pipeline {
     // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest)
     auto contacts = [&](const auto& view) {
       using V = std::decay_t<decltype(view)>;
+      // the tree's walks keep their stacks in shared memory on the device (spatial/lbvh.h)
+      auto walking = [&](const auto& f) {
+        if constexpr (kTree) ex_.for_each_shared(n, f, lbvh_stack_bytes(m_.lbvh_stack));
+        else ex_.for_each(n, f);
+      };
       if (m_.collide && m_.reflexive) {
         ex_.for_each(n, ZeroContactsStage{s});
-        ex_.for_each(n, PairStage<V>{md, g, s, view});
+        walking(PairStage<V>{md, g, s, view});
       }
-      ex_.for_each(n, ForceStage<V>{md, g, u_, s, view, grid_.spec()});
+      walking(ForceStage<V>{md, g, u_, s, view, grid_.spec()});
     };
     if constexpr (Index::kGrid) {
       contacts(grid_.view(s.pos).with_radius(2.0f * m_.radius));  // the contact reach, whatever the cell
     } else if constexpr (kTree) {
-      contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal));
+      contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal, m_.lbvh_stack));
     } else {
       const float reach = 2.0f * m_.radius;
       contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});

@@ -187,25 +187,73 @@ CPS_HD CPS_INLINE float block_density(const AllPairsView<D>& all, const CellGrid
   return float(count - 1) / (float(cells) * spec.cell * spec.cell);
 }
 
-CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec2& x) {
+// the tree: one box query of the 3 x 3 cells (a little wider), each slot found counted when its
+// cell is in the block. With a visitor (the contact gather), the same walk also visits every
+// slot of the contact reach: the query box is the union of the block's and the reach's (the
+// block holds the reach unless x lies outside the grid), a slot is a contact candidate when
+// it lies in the reach's box (as in gather), and the walk meets those slots in the order
+// gather would (the tree's order does not depend on the box): one walk instead of two, the
+// same contacts summed in the same order
+template <class Visit>
+CPS_HD CPS_INLINE float tree_block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, int i, const Vec2& x,
+                                           Visit* contact) {
   int c[D], cj[D];
   spec.cell_of(x, c);
-  float qlo[D], qhi[D];
+  float qlo[D], qhi[D], rlo[D], rhi[D];
   for (int k = 0; k < D; ++k) {
     qlo[k] = spec.origin[k] + float(c[k] - 1) * spec.cell - 1e-3f * spec.cell;
     qhi[k] = spec.origin[k] + float(c[k] + 2) * spec.cell + 1e-3f * spec.cell;
+    rlo[k] = x[k] - tree.radius;
+    rhi[k] = x[k] + tree.radius;
+    if (contact) {
+      qlo[k] = fmin2(qlo[k], rlo[k]);
+      qhi[k] = fmax2(qhi[k], rhi[k]);
+    }
   }
+  const float r2 = tree.radius * tree.radius;
   int count = 0;
   tree.query_box(qlo, qhi, [&](int j) {
-    spec.cell_of(tree.pos[j], cj);
+    const Vec2 pj = tree.pos[j];
+    if (contact) {
+      bool in = true;
+      for (int k = 0; k < D; ++k) in = in && pj[k] >= rlo[k] && pj[k] <= rhi[k];
+      if (in) {
+        const Vec2 d = x - pj;
+        const float rr = norm2(d);
+        if (rr < r2) (*contact)(j, d, rr);
+      }
+    }
+    spec.cell_of(pj, cj);
     const int dx = cj[0] - c[0], dy = cj[1] - c[1];
     count += (dx >= -1 && dx <= 1 && dy >= -1 && dy <= 1) ? 1 : 0;
   });
+  (void)i;
   int cells = 0;
   for (int y = c[1] - 1; y <= c[1] + 1; ++y)
     for (int xx = c[0] - 1; xx <= c[0] + 1; ++xx)
       cells += (xx >= 0 && xx < spec.dims[0] && y >= 0 && y < spec.dims[1]) ? 1 : 0;
   return float(count - 1) / (float(cells) * spec.cell * spec.cell);
+}
+struct NoContactVisit {
+  CPS_HD void operator()(int, const Vec2&, float) const {}
+};
+CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec2& x) {
+  return tree_block_density(tree, spec, -1, x, static_cast<NoContactVisit*>(nullptr));
+}
+
+// the contacts by gather (visit(j, x - x_j, r2) for every slot of the contact reach, i
+// included) and the number density around x: the index's gather, then its block count; the
+// tree does both in one walk (tree_block_density)
+template <class View, class Visit>
+CPS_HD CPS_INLINE float gather_and_density(const View& view, const CellGridSpec<D>& spec, int i, const Vec2& x,
+                                           Visit& visit) {
+  view.gather(i, x, visit);
+  return block_density(view, spec, x);
+}
+template <class Visit>
+CPS_HD CPS_INLINE float gather_and_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, int i, const Vec2& x,
+                                           Visit& visit) {
+  return tree_block_density(tree, spec, i, x, &visit);
 }
 
 // the reflexive form, stage 2a: the per-particle contact sums zeroed
@@ -312,12 +360,8 @@ struct ForceStage {
     const Vec2* vel = s.vel;
     const float r = m.radius;
     const SpringDashpot law = m.pp;
-    if (m.collide && m.reflexive) {
-      // the pairs were summed by PairStage
-      F = s.force[i];
-      pressure = s.pressure[i];
-      contacts = s.contacts[i];
-    } else if (m.collide) grid.gather(i, x, [&](int j, const Vec2&, float) {
+    float density = 0.0f;
+    auto pair = [&](int j, const Vec2&, float) {
       if (j == i) return;
       Vec2 f;
       float mag;
@@ -326,9 +370,16 @@ struct ForceStage {
         pressure += mag;
         contacts += 1;
       }
-    });
-    float density = 0.0f;
-    if (m.collide) density = block_density(grid, spec, x);
+    };
+    if (m.collide && m.reflexive) {
+      // the pairs were summed by PairStage
+      F = s.force[i];
+      pressure = s.pressure[i];
+      contacts = s.contacts[i];
+      density = block_density(grid, spec, x);
+    } else if (m.collide) {
+      density = gather_and_density(grid, spec, i, x, pair);
+    }
     StepSums it = StepSums::identity();
     int scattered = s.scattered[i];
     F += boundary_forces(m, airfoil_frame(m, *ctl), x, v, pressure, contacts, it, scattered);
