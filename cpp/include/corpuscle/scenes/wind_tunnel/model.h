@@ -8,6 +8,7 @@
 #pragma once
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/polygon.h"
+#include "corpuscle/physics/polygon_grid.h"
 #include "corpuscle/sim/table.h"
 #include "corpuscle/spatial/cell_grid.h"
 
@@ -49,7 +50,10 @@ struct Model {
   int n_edges;
   Box2 bbox;             // of the airfoil, widened by the radius
   float edges[kEdgeStride * kMaxEdges];  // polygon edge records (polygon.h)
+  PolygonGridCells foil_cells;  // the edges' grid (polygon_grid.h; its tables: the pipeline's buffers)
   CPS_HD PolygonEdges airfoil() const { return PolygonEdges{edges, n_edges}; }
+  // the airfoil through its grid: the contact and push-out queries (the same hits as airfoil())
+  CPS_HD PolygonGrid airfoil_grid() const { return PolygonGrid{airfoil(), foil_cells}; }
 };
 
 // per-step reductions (combined in a fixed order per backend)

@@ -146,7 +146,7 @@ CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const AirfoilFrame& af, c
   const Vec2 xb = af.to_body(x);
   if (m.n_edges > 0 && box_distance2(m.bbox, xb) < m.radius * m.radius) {
     PolygonHit hit;
-    if (polygon_contact_force(m.wing, m.airfoil(), xb, af.dir_to_body(v), m.radius, f, mag, hit)) {
+    if (polygon_contact_force(m.wing, m.airfoil_grid(), xb, af.dir_to_body(v), m.radius, f, mag, hit)) {
       f = af.dir_to_world(f);
       F += f;
       pressure += mag;
@@ -500,12 +500,12 @@ CPS_HD CPS_INLINE bool keep_out(const Model& m, const AirfoilFrame& af, Vec2& x,
   }
   // (in the airfoil's built frame: af)
   Vec2 xb = af.to_body(x);
-  if (m.n_edges > 0 && box_distance2(m.bbox, xb) == 0.0f && polygon_contains(m.airfoil(), xb)) {
-    PolygonHit hit = polygon_sdf(m.airfoil(), xb);
+  if (m.n_edges > 0 && box_distance2(m.bbox, xb) == 0.0f && polygon_contains(m.airfoil_grid(), xb)) {
+    PolygonHit hit = polygon_sdf(m.airfoil_grid(), xb);
     float step = 0.05f * m.radius;
     for (int k = 0; k < 8; ++k) {
       xb = hit.closest + hit.normal * step;
-      if (!polygon_contains(m.airfoil(), xb)) break;
+      if (!polygon_contains(m.airfoil_grid(), xb)) break;
       step *= 2.0f;
     }
     x = af.to_world(xb);
