@@ -42,6 +42,9 @@ UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/i
                     2: "an LBVH traversal needed more stack than lbvh.stack entries (--neighbors lbvh: raise "
                        f"lbvh.stack, at most {LBVH_MAX_STACK}; the step was not taken)"}
 
+# the default colour range of render and the live viewer: number density 0 .. this x the free stream's
+RENDER_DENSITY_SPAN = 4.0
+
 INTEGRATORS = {"forward-euler": 0, "symplectic-euler": 1}
 CONTACT_FORMS = {"gather": 0, "reflexive": 1, "reflexive-warp": 2}
 
@@ -439,7 +442,20 @@ class WindTunnel(Kind):
                                # the control's pitch turns it (nose up: clockwise) about the quarter chord
                                "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}],
                 "bodies": [], "particles": sim.n_particles, "particle_radius": sim.info["radius"],
-                "mass": sim.info["mass"], "free_stream": [p["speed"], 0.0], "units": dict(self.units)}
+                "mass": sim.info["mass"], "free_stream": [p["speed"], 0.0], "units": dict(self.units),
+                "render": self.render_defaults(sim)}
+
+    @staticmethod
+    def render_defaults(sim) -> dict[str, Any]:
+        """How render and the live viewer colour this kind by default: the number density on a
+        fixed range from the free stream's, 0 to RENDER_DENSITY_SPAN times N / free area. The
+        seed's pressure (contact-force sums) is zero for nearly every particle of the stream,
+        so it showed black on black; the density shows the compressed layer ahead of and under
+        the airfoil (the bow shock, saturating), the stream (a quarter of the ramp) and the
+        rarefied wake behind it (dark)."""
+        n0 = sim.n_particles / float(sim.info["free_area"])
+        return {"color": "number_density", "range": [0.0, RENDER_DENSITY_SPAN * n0], "log": False, "ramp": "heat",
+                "free_stream_density": n0}
 
     def control(self, sim, speed_scale=0.0, pitch=0.0) -> dict[str, list[float]]:
         """The re-entering free stream's speed is U (1 + speed_scale); the airfoil turns nose
