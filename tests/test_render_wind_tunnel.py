@@ -107,3 +107,11 @@ def test_live_viewer_colours_by_the_kinds_field_on_its_range(sim):
     got = protocol.decode_frame(msg)
     assert got["meta"]["color"]["range"] == pytest.approx([0.0, 4 * n0])
     assert np.all(got["color"] == 63)  # a quarter of 255
+
+
+def test_tick_labels_fit_the_colour_bar():
+    from corpuscle._overlay import format_tick
+
+    assert format_tick(73868.9) == "7.39e+04" and format_tick(36934.45) == "3.69e+04"
+    assert format_tick(1234.5) == "1234" and format_tick(0.0) == "0" and format_tick(2.5e-5) == "2.50e-05"
+    assert all(len(format_tick(v)) <= 8 for v in (9999.4, 1e4, 5.5e5, 0.00123, 1.0, 123.456))

@@ -7,6 +7,7 @@
 #include <cuda_runtime.h>
 #include <thrust/iterator/counting_iterator.h>
 
+#include <atomic>
 #include <cstddef>
 #include <cub/cub.cuh>
 #include <cstring>
@@ -199,6 +200,7 @@ struct ScanPlus {
 struct CudaExec {
   static constexpr bool on_device = true;
   static constexpr int kBlock = 128;
+  static constexpr int kMaxDevices = 64;  // devices a per-device cache of function attributes covers
   static constexpr int kReduceThreads = 512;
   static constexpr int kSmallReduce = 1 << 14;
 
@@ -296,8 +298,15 @@ struct CudaExec {
     activate();
     if (n <= 0) return;
     const size_t bytes = bytes_per_thread * size_t(kBlock);
-    if (bytes > 48 * 1024)
-      CPS_CUDA_CHECK(cudaFuncSetAttribute(k_for_each<F>, cudaFuncAttributeMaxDynamicSharedMemorySize, int(bytes)));
+    if (bytes > 48 * 1024) {
+      // once per kernel, device and size (the first, eager step: not while a graph is captured)
+      static std::atomic<size_t> granted[kMaxDevices] = {};
+      const int d = device_ >= 0 && device_ < kMaxDevices ? device_ : 0;
+      if (granted[d].load() < bytes) {
+        CPS_CUDA_CHECK(cudaFuncSetAttribute(k_for_each<F>, cudaFuncAttributeMaxDynamicSharedMemorySize, int(bytes)));
+        granted[d].store(bytes);
+      }
+    }
     k_for_each<<<(n + kBlock - 1) / kBlock, kBlock, bytes, stream_>>>(n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
