@@ -45,8 +45,8 @@ namespace cps {
 // of the CPU's local array; on the device 128 threads x 4 bytes x depth of shared memory per
 // block). The walk below keeps one entry per level where the query box overlaps both
 // children, so the depth a query needs grows with the tree's depth only where the box
-// straddles splits: 2,097,152 and 131,072 particles of the default wind tunnel need at most
-// a handful (see docs/architecture.md).
+// straddles splits: the default wind tunnel needs 5 or 6 at 131,072 and 2,097,152 particles
+// (see docs/architecture.md).
 constexpr int kLbvhStack = 32;
 constexpr int kLbvhMaxStack = 128;
 
