@@ -200,8 +200,9 @@ def test_checkpoint_resumes_bitwise():
         assert np.array_equal(a.field(name), b.field(name)), name
     sa, sb = a.scalars(), b.scalars()
     assert sa["nblocks"] > 0
-    for k in ("time", "step", "recycled", "blocks_lift", "block_lift_sum"):
+    for k in ("time", "step", "recycled", "blocks_lift", "block_lift_sum", "inflow_distance"):
         assert sa[k] == sb[k], k
+    assert np.array_equal(sa["conveyor_next"], sb["conveyor_next"]) and np.any(np.asarray(sa["conveyor_next"]) > 0)
 
 
 def test_speed_scale_control_changes_the_reentering_stream():
@@ -212,9 +213,9 @@ def test_speed_scale_control_changes_the_reentering_stream():
     v = sim.velocities
     x = sim.positions[:, 0]
     lo, _ = channel(sim)
-    # particles that re-entered recently sit near the inflow, most still at 1.5 U (some have
-    # already hit the slower gas ahead of them)
-    fresh = x < lo[0] + 0.05
+    # particles that re-entered recently sit near the inflow (within the conveyor's first
+    # columns), most still at 1.5 U (some have already hit the slower gas ahead of them)
+    fresh = x < lo[0] + max(0.05, 1.5 * sim.params["conv_dx"])
     assert fresh.sum() >= 5 and np.mean(np.abs(v[fresh, 0] - 3.0) < 1e-5) > 0.5
     with pytest.raises(ValueError):
         sim.set_control(speed_scale=-1.0)
@@ -335,3 +336,70 @@ def test_cuda_pitched_airfoil_matches_cpu():
     assert np.abs(fg - fc).max() <= 1e-4 * np.abs(fc).max()
     for k in ("lift", "drag"):
         assert sg[k] == pytest.approx(sc[k], rel=1e-4, abs=1e-4 * np.abs(fc).max())
+
+
+def _inlet_overlaps(sim, width):
+    """Particles within `width` of the inlet, and how many of them overlap another one."""
+    lo, _ = channel(sim)
+    r = float(sim.params["radius"])
+    x = sim.field("position", copy=True)
+    near = x[x[:, 0] < lo[0] + width]
+    d2 = ((near[:, None, :] - near[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    return len(near), int(np.count_nonzero(d2.min(axis=1) < (2 * r) ** 2))
+
+
+def test_cold_beam_enters_as_a_lattice_without_overlaps():
+    # the cold beam's re-entering particles take the inflow conveyor's slots: the stream that
+    # enters is the start's lattice (cold, no particle on another), where a uniformly random
+    # height would land about 40% of them on a neighbour (4 x the solid fraction 0.1)
+    sim = make(particles=4000, inflow__speed=1.0)
+    rows, dx = sim.params["conv_rows"], sim.params["conv_dx"]
+    assert rows > 0 and dx > 2 * sim.params["radius"]
+    lo, hi = channel(sim)
+    area0 = (hi[1] - lo[1]) * 0.5
+    n0 = np.count_nonzero(sim.field("position", copy=True)[:, 0] < lo[0] + 0.5)
+    for _ in range(4):
+        sim.step(500)
+        n_in, over = _inlet_overlaps(sim, 0.5)
+        assert over == 0
+        v = sim.field("velocity", copy=True)
+        x = sim.field("position", copy=True)
+        fresh = x[:, 0] < lo[0] + 0.5
+        assert np.all(v[fresh] == np.float32([1.0, 0.0]))  # cold: exactly the free stream
+        assert n_in == pytest.approx(n0, rel=0.1)  # the start's number density
+    s = sim.scalars()
+    assert s["recycled"] > 1000
+    assert s["inflow_distance"] == pytest.approx(sim.time * 1.0, rel=1e-6)
+
+
+def test_random_height_entry_would_overlap():
+    # the check above can fail: the same run re-entering at random heights has overlapping
+    # particles at the inlet
+    sim = make(particles=4000, inflow__speed=1.0, inflow__lattice=False)
+    assert sim.params.get("conv_rows", 0) == 0
+    sim.step(1500)
+    assert _inlet_overlaps(sim, 0.5)[1] > 10
+
+
+def test_conveyor_only_for_a_cold_beam_with_contacts_and_within_its_rows():
+    for ov in ({"inflow.speed_ratio": 3.0}, {"contact.enabled": False}, {"inflow.lattice": False}):
+        sim = Simulation.from_scene(load_scene("wind-tunnel"), backend="serial", particles=500, overrides=ov)
+        assert sim.params.get("conv_rows", 0) == 0, ov
+    lo, hi = np.array([-1.78, -1.0]), np.array([1.78, 1.0])
+    poly = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.01]])
+    # more rows than the core holds: no conveyor (random heights), never an error
+    assert wt.WindTunnel._conveyor(10**9, 1e-6, lo, hi, poly) == {"conv_rows": 0}
+    c = wt.WindTunnel._conveyor(20000, 0.003, lo, hi, poly)
+    assert 0 < c["conv_rows"] <= wt.KMAX_ROWS and c["conv_dx"] > 0.006 and c["conv_dy"] > 0.006
+
+
+def test_conveyor_runs_are_bitwise_equal_on_serial_and_openmp():
+    # the smallest id wins a contested row, whatever the threads' order
+    a, b = make("serial", particles=3000, inflow__speed=2.0), make("cpu", particles=3000, inflow__speed=2.0)
+    a.step(700)
+    b.step(700)
+    for name in ("position", "velocity", "id"):
+        assert np.array_equal(a.field(name), b.field(name)), name
+    sa, sb = a.scalars(), b.scalars()
+    assert sa["recycled"] > 1000 and np.array_equal(sa["conveyor_next"], sb["conveyor_next"])

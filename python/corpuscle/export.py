@@ -168,7 +168,8 @@ def _body_part(name: str, spec: dict, state: dict, dim: int) -> Part:
 
 
 def _obstacle_part(ob: dict, k: int) -> Part | None:
-    """A fixed obstacle: a polygon as one polygon cell, a 3-D box as its 6 faces."""
+    """A fixed obstacle: a polygon as one polygon cell (an extruded one as its two caps and
+    its sides), a 3-D box as its 6 faces."""
     if ob.get("type") == "box" and len(ob.get("min", ())) == 3:
         lo, hi = np.asarray(ob["min"], float), np.asarray(ob["max"], float)
         part = _body_part(f"obstacle_{ob.get('name', k)}", {"shape": "box", "half_extents": 0.5 * (hi - lo)},
@@ -178,6 +179,22 @@ def _obstacle_part(ob: dict, k: int) -> Part | None:
     pts = ob.get("points")
     if pts is None or len(pts) < 3:
         return None
+    ext = ob.get("extrude")
+    if isinstance(ext, (list, tuple)) and len(ext) == 2:
+        # an x-y section swept along z from ext[0] to ext[1] (wind-tunnel-3d's airfoil): its two
+        # end caps (polygons) and one quad per edge
+        xy = np.asarray(pts, float)[:, :2]
+        n = len(xy)
+        p = np.vstack([np.column_stack([xy, np.full(n, float(ext[0]))]), np.column_stack([xy, np.full(n, float(ext[1]))])])
+        conn = list(range(n)) + list(range(2 * n - 1, n - 1, -1))
+        offs, types = [n, 2 * n], [VTK_POLYGON, VTK_POLYGON]
+        for i in range(n):
+            j = (i + 1) % n
+            conn += [i, j, n + j, n + i]
+            offs.append(len(conn))
+            types.append(VTK_QUAD)
+        return Part(f"obstacle_{ob.get('name', k)}", p, np.array(conn, np.int64), np.array(offs, np.int64),
+                    np.array(types, np.uint8))
     p = _pad3(np.asarray(pts, float)[:, :3])
     n = len(p)
     return Part(f"obstacle_{ob.get('name', k)}", p, np.arange(n, dtype=np.int64), np.array([n], np.int64),

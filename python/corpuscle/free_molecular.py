@@ -35,6 +35,18 @@ surface the simulated particle centres actually touch, the polygon offset by the
 radius (its edges, moved out by r, and circular arcs of radius r at its vertices, by
 Gauss-Legendre quadrature), which tends to the thin-plate result as the thickness and the
 radius go to zero.
+
+The same holds in 3-D, per unit span, for a section extruded along z (the wind-tunnel-3d
+kind, span-periodic): every surface normal n lies in the x-y plane, and p_i above uses only
+the marginal of the velocity component w = c . n. For the 3-D drifting Maxwellian
+f(c) = n_inf (pi c_m^2)^(-3/2) exp(-|c - U|^2 / c_m^2), write c in an orthonormal basis
+(n, t, z); the exponent is the sum of the three components' squares, so f factorises and the
+integrals over the t and z components are 1: the marginal of w is
+(pi c_m^2)^(-1/2) exp(-(w - U . n)^2 / c_m^2), the same 1-D drifting Maxwellian as the 2-D
+gas's (whose marginal is found the same way with one tangential component). The reflection
+changes only w (frictionless, restitution e), so the t and z components carry no force; C_p,
+thin_plate and convex_body hold unchanged with rho = m n_inf the mass per unit volume and the
+force per unit span.
 """
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ def parse_aoa(text: str) -> list[float]:
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", metavar="SCENE|FILE.toml", help="a wind-tunnel scene (built-in name or file)")
+    p.add_argument("scene", metavar="SCENE|FILE.toml", help="a wind-tunnel or wind-tunnel-3d scene (built-in name or file)")
     p.add_argument("--aoa", required=True, metavar="START:STOP:STEP",
                    help="angles of attack in degrees, e.g. -10:20:2 (inclusive) or 0,5,10")
     p.add_argument("--backend", choices=("auto", "serial", "cpu", "cuda"), default="auto", help="backend")
@@ -91,8 +91,9 @@ def run_command(args: argparse.Namespace) -> int:
     if end is not None and not end > 0:
         raise UsageError(f"--end-time must be positive, got {args.end_time!r}")
     scene = _load_with_options(args, {})
-    if scene.kind != "wind-tunnel":
-        raise UsageError(f"polar: scene {scene.name!r} is of kind {scene.kind!r}; polar sweeps a wind-tunnel scene")
+    if scene.kind not in ("wind-tunnel", "wind-tunnel-3d"):  # 3-D: the coefficients per unit span, the same theory
+        raise UsageError(f"polar: scene {scene.name!r} is of kind {scene.kind!r}; polar sweeps a wind-tunnel or "
+                         f"wind-tunnel-3d scene")
     if end is not None:
         scene = scene.with_overrides({"run.end_time": end})
     prefix = pathlib.Path(args.out) if args.out else pathlib.Path(f"polar-{scene.name}")

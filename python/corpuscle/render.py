@@ -167,6 +167,46 @@ def _scene(header: dict, dim: int) -> _Scene:
     return _Scene(dim, info["container"], info["obstacles"], bodies, info["particle_radius"], info["name"], up_axis(info))
 
 
+def monotone_triangles(p2: np.ndarray) -> list[tuple[int, int, int]]:
+    """Triangles (vertex index triples) covering a simple polygon that is monotone along its
+    longest extent (an airfoil section along its chord: two chains from the vertex furthest
+    one way to the vertex furthest the other), by zipping the two chains in order along that
+    direction: each triangle joins the chains' current vertices and the next vertex of
+    whichever chain comes first. A chain that is not monotone gives no triangles (the sides
+    are still drawn)."""
+    p = np.asarray(p2, dtype=np.float64)
+    n = len(p)
+    if n < 3:
+        return []
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    c = 0.5 * (lo + hi)
+    # the direction of the longest extent: the pair of vertices furthest apart from the centre's two extremes
+    far = int(np.argmax(((p - c) ** 2).sum(1)))
+    other = int(np.argmax(((p - p[far]) ** 2).sum(1)))
+    u = p[other] - p[far]
+    if not np.any(u):
+        return []
+    t = p @ (u / np.linalg.norm(u))
+    a, b = int(np.argmin(t)), int(np.argmax(t))
+    chain1 = [(a + k) % n for k in range((b - a) % n + 1)]          # a -> b forwards
+    chain2 = [(a - k) % n for k in range((a - b) % n + 1)]          # a -> b backwards
+    for ch in (chain1, chain2):
+        if np.any(np.diff(t[ch]) < 0):
+            return []
+    out = []
+    i = j = 0
+    while i < len(chain1) - 1 or j < len(chain2) - 1:
+        if j == len(chain2) - 1 or (i < len(chain1) - 1 and t[chain1[i + 1]] <= t[chain2[j + 1]]):
+            tri = (chain1[i], chain1[i + 1], chain2[j])
+            i += 1
+        else:
+            tri = (chain1[i], chain2[j + 1], chain2[j])
+            j += 1
+        if len(set(tri)) == 3:
+            out.append(tri)
+    return out
+
+
 def _field_label(name: str, header: dict) -> str:
     u = units_of(name, header)
     return f"{name} [{u}]" if u and u != "-" else name
@@ -211,6 +251,7 @@ class FrameRenderer:
         self.colorbar = bool(colorbar)
         self._samples = list(sample_frames)
         self._ready = False
+        self._cap_cache: dict = {}  # an extruded obstacle's cap triangles (vertex indices)
         self._raster = _raster()
         if self.overlay or self.colorbar:
             require("PIL", "pillow", "frame text and colour bars", RenderError)
@@ -509,10 +550,51 @@ class FrameRenderer:
             if ob.get("type") == "box" and len(ob.get("min", ())) == 3:
                 lo, hi = np.asarray(ob["min"], float), np.asarray(ob["max"], float)
                 self._box_triangles(0.5 * (lo + hi), np.eye(3), 0.5 * (hi - lo), {}, tris, cols, OBSTACLE_FILL)
+        # extruded sections (3-D): an x-y polygon swept along z over its `extrude` range (the 3-D
+        # wind tunnel's airfoil), turned as the frame's diagnostics say: lit sides and end caps
+        for ob in self.scene.obstacles:
+            ext = ob.get("extrude")
+            pts = turned_points(ob, getattr(frame, "diagnostics", None)) if ext is not None else None
+            if pts is not None and len(pts) >= 3 and len(ext) == 2:
+                self._extruded_triangles(ob, pts[:, :2], float(ext[0]), float(ext[1]), tris, cols)
         if tris:
             v = self.camera.project(np.concatenate(tris).reshape(-1, 3))[:, :3].reshape(-1, 9)
             self._raster.triangles(img, depth, np.ascontiguousarray(v, np.float32),
                                    np.ascontiguousarray(np.array(cols, np.uint8)), self.camera.ortho, True)
+
+    def _extruded_triangles(self, ob, p2: np.ndarray, z0: float, z1: float, tris, cols) -> None:
+        """The sides (one quad per edge, facing the camera) and the two caps of a polygon
+        p2 (n, 2) swept from z0 to z1."""
+        n = len(p2)
+        area = 0.5 * float(np.sum(p2[:, 0] * np.roll(p2[:, 1], -1) - np.roll(p2[:, 0], -1) * p2[:, 1]))
+        orient = 1.0 if area >= 0 else -1.0  # outward normals for either orientation
+        for i in range(n):
+            a, b = p2[i], p2[(i + 1) % n]
+            d = b - a
+            length = float(np.hypot(d[0], d[1]))
+            if length == 0.0:
+                continue
+            n_w = orient * np.array([d[1], -d[0], 0.0]) / length
+            q = [np.array([a[0], a[1], z0]), np.array([b[0], b[1], z0]), np.array([b[0], b[1], z1]),
+                 np.array([a[0], a[1], z1])]
+            if not self.camera.facing(0.25 * (q[0] + q[1] + q[2] + q[3]), n_w):
+                continue
+            k = self._shade(n_w)
+            col = tuple(int(min(255, ch * k)) for ch in OBSTACLE_FILL)
+            tris += [np.array([q[0], q[1], q[2]]), np.array([q[0], q[2], q[3]])]
+            cols += [col, col]
+        key = id(ob)
+        if key not in self._cap_cache:
+            self._cap_cache[key] = monotone_triangles(np.asarray(ob["points"], float)[:, :2])
+        for z, nz in ((z0, -1.0), (z1, 1.0)):
+            n_w = np.array([0.0, 0.0, nz])
+            if not self.camera.facing(np.array([p2[:, 0].mean(), p2[:, 1].mean(), z]), n_w):
+                continue
+            k = self._shade(n_w)
+            col = tuple(int(min(255, ch * k)) for ch in OBSTACLE_FILL)
+            for i, j, m in self._cap_cache[key]:
+                tris.append(np.array([[p2[i, 0], p2[i, 1], z], [p2[j, 0], p2[j, 1], z], [p2[m, 0], p2[m, 1], z]]))
+                cols.append(col)
 
     def _box_triangles(self, pos, rot, he, faces, tris, cols, rgb=DIE_RGB) -> None:
         """Lit faces of a box and the pips of its numbered faces that face the camera."""

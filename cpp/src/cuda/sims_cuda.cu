@@ -46,7 +46,7 @@ static void use_device(int device) {
 std::unique_ptr<Sim> make_sim_cuda(const SimRequest& r) {
   use_device(r.device);
   if (r.kind == "magic8ball") return m8::make(CudaExec(), r);
-  if (r.kind == "wind-tunnel") return wt::make(CudaExec(), r);
+  if (wt::is_kind(r.kind)) return wt::make(CudaExec(), r);  // wind-tunnel, wind-tunnel-3d
   if (sph::is_kind(r.kind)) return sph::make_kind(CudaExec(), r);
   throw Error("unknown scene kind '" + r.kind + "'");
 }

@@ -23,6 +23,7 @@ Vec3 ParamSource::vec3(const std::string& key) const {
 
 const std::vector<KindInfo>& kinds() {
   static const std::vector<KindInfo> k = {{"magic8ball", m8::index_names()}, {"wind-tunnel", wt::index_names()},
+                                              {"wind-tunnel-3d", wt::index_names()},
                                               {"fluid-box", sph::index_names()},
                                               {"dam-break", sph::index_names()},
                                               {"dam-break-2d", sph::index_names()}};
@@ -52,7 +53,7 @@ std::unique_ptr<Sim> make_sim(const SimRequest& r) {
 
 double bytes_needed(const SimRequest& r) {
   kind_of(r);
-  if (r.kind == "wind-tunnel") return wt::bytes<CpuExec>(r);
+  if (wt::is_kind(r.kind)) return wt::bytes<CpuExec>(r);
   if (sph::is_kind(r.kind)) return sph::bytes<CpuExec>(r);
   return m8::bytes<CpuExec>(r);
 }

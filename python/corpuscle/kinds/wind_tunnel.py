@@ -12,10 +12,15 @@ The core is cpp/include/corpuscle/scenes/wind_tunnel/.
 
 Units: SI, 2-D (a mass is per particle, a force per unit span). The seed's particles have
 unit mass (its accelerations are its forces).
+
+The class is written for both dimensions (``dim``): :mod:`corpuscle.kinds.wind_tunnel_3d` is
+the same kind in 3-D (the channel with a periodic span along z, the section extruded across
+it), built by the same code paths (the core's stages are one template on D).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from typing import Any
@@ -34,6 +39,7 @@ __all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "resti
 MAX_PITCH = 45.0
 
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
+KMAX_ROWS = 16384  # the inflow conveyor's rows the core holds (scenes/wind_tunnel/model.h kMaxRows)
 
 # the LBVH traversal stack (entries per thread; shared memory on CUDA): the default and the most
 LBVH_STACK, LBVH_MAX_STACK = 32, 128
@@ -92,6 +98,9 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "inflow.speed_ratio": _K("float", 0.0, "", 0.0, 1e6,
                              "speed ratio S = U / sqrt(2 kT / m) of the Maxwellian free stream; > 0 sets "
                              "inflow.thermal = 1 / S (0: inflow.thermal decides)"),
+    "inflow.lattice": _K("bool", True, "", doc="a cold beam with contacts re-enters as the start's lattice "
+                         "(slots moving in at U: no particle lands on another); false: at uniformly random "
+                         "heights (overlaps heat the stream)"),
     # the airfoil
     "airfoil.shape": _K("str", "e398", "", doc="'e398' (shipped), a NACA 4-digit code ('naca2412'), "
                         "'flat-plate', or the path of a Selig/Lednicer .dat file (relative: to the scene "
@@ -119,6 +128,34 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
                              "initial averaging block length; 0: the steady part / 64 (blocks double as needed)"),
 }
 del _K
+
+
+def keys_3d(defaults: dict[str, int], end_time: float, span: float) -> dict[str, KeySpec]:
+    """The 3-D kind's keys: the 2-D ones (same names, same meaning), the solid fraction a
+    volume fraction, the default cell from the volume per particle, and channel.span (the
+    periodic extent along z) after channel.height."""
+    out: dict[str, KeySpec] = {}
+    for name, spec in WIND_TUNNEL_KEYS.items():
+        if name == "run.end_time":
+            spec = dataclasses.replace(spec, default=end_time)
+        elif name == "gas.particles":
+            spec = dataclasses.replace(spec, doc=f"number of particles; 0: {defaults['cuda']:,} on CUDA, "
+                                                 f"{defaults['cpu']:,} on the CPU backends")
+        elif name == "gas.solid_fraction":
+            spec = dataclasses.replace(spec, doc="volume fraction N (4/3) pi r^3 / free volume that sets the radius "
+                                                 "when gas.radius = 0")
+        elif name == "grid.cell":
+            spec = dataclasses.replace(spec, doc="cell edge of the broad-phase grid, at least a contact diameter (0: "
+                                                 "about one cell per particle, (free volume / N)^(1/3))")
+        elif name == "airfoil.leading_edge":
+            spec = dataclasses.replace(spec, doc="leading-edge position (x, y; the section spans every z)")
+        out[name] = spec
+        if name == "channel.height":
+            out["channel.span"] = KeySpec("float", span, "m", 0.0, 1e4,
+                                          "channel span along z, periodic (z from -span/2 to span/2; the airfoil "
+                                          "section is extruded across all of it); at least 4 particle radii",
+                                          lo_open=True)
+    return out
 
 
 def _channel_room(values: dict[str, Any], arrays) -> None:
@@ -231,6 +268,7 @@ class WindTunnel(Kind):
     name = "wind-tunnel"
     schema = SCHEMA
     dim = 2
+    default_particles = DEFAULT_PARTICLES
     particle_key = "gas.particles"
     unstable_reasons = UNSTABLE_REASONS
     frame_fields = ("position", "pressure", "number_density")
@@ -260,14 +298,32 @@ class WindTunnel(Kind):
             rest.pop("particles_note")
         return lines, rest
 
+    # the span (m) of a 3-D channel; 1 in 2-D (forces per unit span are the totals there)
+    def span(self, values) -> float:
+        return float(values["channel.span"]) if self.dim == 3 else 1.0
+
     def build(self, scene, target: Target, checkpoint: dict | None = None) -> Build:
         v = scene.values
-        n = int(v["gas.particles"]) or DEFAULT_PARTICLES.get(target.backend, 131_072)
+        d = self.dim
+        n = int(v["gas.particles"]) or self.default_particles.get(target.backend, self.default_particles["cpu"])
         L, H = float(v["channel.length"]), float(v["channel.height"])
         lo, hi = np.array([-L / 2, -H / 2]), np.array([L / 2, H / 2])
         poly = airfoil_polygon(v)
         free_area = L * H - abs(airfoils.signed_area(poly))
-        radius = float(v["gas.radius"]) or math.sqrt(float(v["gas.solid_fraction"]) * free_area / (math.pi * n))
+        if d == 2:
+            radius = float(v["gas.radius"]) or math.sqrt(float(v["gas.solid_fraction"]) * free_area / (math.pi * n))
+            free = free_area  # the free area (2-D) or volume (3-D)
+        else:
+            B = self.span(v)
+            lo, hi = np.array([-L / 2, -H / 2, -B / 2]), np.array([L / 2, H / 2, B / 2])
+            free = free_area * B
+            radius = float(v["gas.radius"]) or (3.0 * float(v["gas.solid_fraction"]) * free / (4.0 * math.pi * n)) ** (1 / 3)
+            if not B >= 4 * radius * (1 + 2e-4):
+                given = (f"gas.radius = {radius:g} m" if v["gas.radius"] else
+                         f"gas.radius = {radius:.3g} m (from gas.solid_fraction = {v['gas.solid_fraction']:g} "
+                         f"and gas.particles = {n})")
+                raise SceneError(f"channel.span = {B:g} m is too narrow for {given}: the periodic span must be at "
+                                 f"least 4 particle radii ({4 * radius:.3g} m)")
         if not H > 2 * radius:
             given = (f"gas.radius = {radius:g} m" if v["gas.radius"] else
                      f"gas.radius = {radius:.3g} m (from gas.solid_fraction = {v['gas.solid_fraction']:g} "
@@ -296,10 +352,13 @@ class WindTunnel(Kind):
             "reflexive": CONTACT_FORMS[v["contact.form"]], "dt_fraction": float(v["timestep.fraction"]),
             # about one cell per particle: at 2,097,152 particles on the H200 2,574 steps/s
             # against 1,846 with cells of one contact diameter (most of them empty, 2026-12-01)
-            "cell": float(v["grid.cell"]) or math.sqrt(free_area / n), "lbvh_stack": int(v["lbvh.stack"]),
+            "cell": float(v["grid.cell"]) or (math.sqrt(free_area / n) if d == 2 else (free / n) ** (1 / 3)),
+            "lbvh_stack": int(v["lbvh.stack"]),
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
+        if params["collide"] and params["thermal"] == 0.0 and v["inflow.lattice"]:
+            params.update(self._conveyor(n, radius, lo, hi, poly))
         check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius")),
                      f"{n} particles")
         if len(poly) > 1024:
@@ -309,14 +368,16 @@ class WindTunnel(Kind):
         else:
             pos = np.ascontiguousarray(checkpoint["position"], dtype=np.float32)
             vel = np.ascontiguousarray(checkpoint["velocity"], dtype=np.float32)
-            if pos.shape != (n, 2):
+            if pos.shape != (n, d):
                 raise ValueError(f"checkpoint: {pos.shape[0] if pos.ndim else 0} particles, the scene has {n}")
-        rho = n * m / free_area
+        rho = n * m / free  # per unit area (2-D) or volume (3-D)
         info = {"radius": radius, "mass": m, "density": rho, "chord": chord, "airfoil": poly, "free_area": free_area,
                 "speed": float(v["inflow.speed"]), "measure_start": t0,
                 "restitution_pp": restitution(laws["contact"][0], laws["contact"][1], m / 2),
                 "restitution_wall": restitution(laws["wall"][0], laws["wall"][1], m),
                 "restitution_wing": restitution(laws["wing"][0], laws["wing"][1], m)}
+        if d == 3:
+            info.update(span=self.span(v), free_volume=free)  # the free volume's section: free_area
         arrays = {"position": pos, "velocity": vel, "airfoil": np.ascontiguousarray(poly, dtype=np.float32)}
         return Build(params, arrays, info)
 
@@ -329,27 +390,33 @@ class WindTunnel(Kind):
         rng = np.random.default_rng(seed)
         if not params.get("collide", 1):
             return WindTunnel._place_uniform(n, radius, lo, hi, poly, params, rng)
+        if params.get("conv_rows", 0):
+            return WindTunnel._place_conveyor(n, radius, lo, hi, poly, params, rng)
+        d = len(lo)
         ext = hi - lo - 2 * radius
-        free = float(np.prod(ext)) - abs(airfoils.signed_area(poly))
-        a = math.sqrt(free / (n * 1.1))
+        if d == 3:
+            ext[2] = hi[2] - lo[2]  # the periodic span: no wall to keep clear of
+        free = float(np.prod(ext[:2])) - abs(airfoils.signed_area(poly))
+        a = math.sqrt(free / (n * 1.1)) if d == 2 else (free * ext[2] / (n * 1.1)) ** (1 / 3)
         if a <= 2 * radius * 1.0001:
             raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
                              f"(lattice spacing {a:.3g} m < a diameter)")
         while True:
             # at least one site each way: a spacing wider than the channel (a handful of
             # particles) would leave no row and divide by zero
-            nx, ny = max(1, int(ext[0] / a)), max(1, int(ext[1] / a))
-            xs = lo[0] + radius + (np.arange(nx) + 0.5) * (ext[0] / nx)
-            ys = lo[1] + radius + (np.arange(ny) + 0.5) * (ext[1] / ny)
-            X, Y = np.meshgrid(xs, ys, indexing="ij")
-            pts = np.column_stack([X.ravel(), Y.ravel()])
-            gap = min(ext[0] / nx, ext[1] / ny)
+            counts = [max(1, int(ext[k] / a)) for k in range(d)]
+            axes = [lo[k] + radius + (np.arange(counts[k]) + 0.5) * (ext[k] / counts[k]) for k in range(2)]
+            if d == 3:
+                axes.append(lo[2] + (np.arange(counts[2]) + 0.5) * (ext[2] / counts[2]))
+            grids = np.meshgrid(*axes, indexing="ij")
+            pts = np.column_stack([g.ravel() for g in grids])
+            gap = min(ext[k] / counts[k] for k in range(d))
             pts += rng.uniform(-1, 1, pts.shape) * 0.45 * (gap - 2 * radius)
             box_lo, box_hi = poly.min(axis=0) - 2 * radius, poly.max(axis=0) + 2 * radius
-            near = np.all((pts > box_lo) & (pts < box_hi), axis=1)
+            near = np.all((pts[:, :2] > box_lo) & (pts[:, :2] < box_hi), axis=1)
             keep = np.ones(len(pts), dtype=bool)
-            if near.any():
-                keep[near] = signed_distance(poly, pts[near]) > 1.05 * radius
+            if near.any():  # the airfoil section (extruded along z in 3-D): the x-y distance
+                keep[near] = signed_distance(poly, pts[near][:, :2]) > 1.05 * radius
             pts = pts[keep]
             if len(pts) >= n:
                 break
@@ -367,18 +434,101 @@ class WindTunnel(Kind):
         return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
 
     @staticmethod
+    def _conveyor_slots(radius, lo, hi, c):
+        """Unjittered slot centres of the cold beam's lattice over the channel: row r at height
+        y0 + (r mod ny) dy (3-D: in the span's layer r // ny, z0 + (r // ny) dz), columns dx
+        apart from the inlet at the row's phase (stages.h, "The inflow conveyor": the same
+        formulas, so the stream entering later continues this lattice)."""
+        rows, ny, dx, dy = c["conv_rows"], c["conv_ny"], c["conv_dx"], c["conv_dy"]
+        g = np.arange(rows) * 0.6180339887498949
+        phase = dx * (g - np.floor(g))
+        L = hi[0] - lo[0]
+        ncol = np.maximum(np.ceil((L - phase) / dx).astype(np.int64) - 1, 0)  # columns 1 .. ncol
+        r = np.repeat(np.arange(rows), ncol)
+        col = np.concatenate([np.arange(1, k + 1) for k in ncol]) if rows else np.empty(0, np.int64)
+        x = lo[0] + phase[r] + col * dx
+        cols = [x, c["conv_y0"] + (r % ny) * dy]
+        if len(lo) == 3:
+            cols.append(c["conv_z0"] + (r // ny) * c["conv_dz"])
+        pts = np.column_stack(cols)
+        return pts[x < hi[0] - 0.45 * dx]  # jittered, still short of the outflow
+
+    @staticmethod
+    def _conveyor(n, radius, lo, hi, poly) -> dict:
+        """The inflow conveyor of a cold beam with contacts: the start lattice's rows and
+        spacing (n sites and 10% more over the free area or volume, as the random start had),
+        so the stream that enters later is the lattice the run starts from. Deterministic (no
+        random numbers): a resumed run rebuilds the same one. More rows than the core holds
+        (stages.h kMaxRows): no conveyor (re-entry at random heights)."""
+        d = len(lo)
+        ext = hi - lo - 2 * radius
+        if d == 3:
+            ext[2] = hi[2] - lo[2]  # the periodic span: no wall to keep clear of
+        free = float(np.prod(ext[:2])) - abs(airfoils.signed_area(poly))
+        a = math.sqrt(free / (n * 1.1)) if d == 2 else (free * ext[2] / (n * 1.1)) ** (1 / 3)
+        while True:
+            if a <= 2 * radius * 1.0001:
+                raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
+                                 f"(lattice spacing {a:.3g} m < a diameter)")
+            ny = max(1, int(ext[1] / a))
+            nz = max(1, int(ext[2] / a)) if d == 3 else 1
+            if ny * nz > KMAX_ROWS:
+                return {"conv_rows": 0}
+            c = {"conv_rows": ny * nz, "conv_ny": ny, "conv_y0": lo[1] + radius + 0.5 * ext[1] / ny,
+                 "conv_dy": ext[1] / ny, "conv_dx": a}
+            if d == 3:
+                c.update(conv_z0=lo[2] + 0.5 * ext[2] / nz, conv_dz=ext[2] / nz)
+            if min(c["conv_dy"], c.get("conv_dz", a)) > 2 * radius * 1.0001:
+                pts = WindTunnel._conveyor_slots(radius, lo, hi, c)
+                gaps = [a - 2 * radius, c["conv_dy"] - 2 * radius] + ([c["conv_dz"] - 2 * radius] if d == 3 else [])
+                jitter = 0.45 * math.hypot(gaps[0], gaps[1])  # in x-y, where the airfoil is
+                if len(pts) >= n and np.count_nonzero(WindTunnel._clear(pts[:, :2], poly, 1.05 * radius + jitter)) >= n:
+                    return c
+            a *= 0.97
+
+    @staticmethod
+    def _clear(pts, poly, clearance):
+        box_lo, box_hi = poly.min(axis=0) - clearance, poly.max(axis=0) + clearance
+        near = np.all((pts > box_lo) & (pts < box_hi), axis=1)
+        keep = np.ones(len(pts), dtype=bool)
+        if near.any():
+            keep[near] = signed_distance(poly, pts[near]) > clearance
+        return keep
+
+    @staticmethod
+    def _place_conveyor(n, radius, lo, hi, poly, params, rng):
+        """The start as the conveyor's lattice (see _conveyor): its slots jittered as the entering
+        ones are, those 1.05 radii clear of the airfoil kept, n of them drawn at random."""
+        d = len(lo)
+        pts = WindTunnel._conveyor_slots(radius, lo, hi, params)
+        gaps = [params["conv_dx"], params["conv_dy"]] + ([params["conv_dz"]] if d == 3 else [])
+        pts = pts + rng.uniform(-1, 1, pts.shape) * 0.45 * (np.array(gaps) - 2 * radius)
+        if d == 3:  # the periodic span
+            pts[:, 2] = lo[2] + np.mod(pts[:, 2] - lo[2], hi[2] - lo[2])
+        pts = pts[WindTunnel._clear(pts[:, :2], poly, 1.05 * radius)]  # (_conveyor made sure n of them are)
+        pick = np.sort(rng.choice(len(pts), size=n, replace=False))
+        pos = pts[pick]
+        vel = np.zeros_like(pos)
+        vel[:, 0] = params["speed"]
+        return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
+
+    @staticmethod
     def _place_uniform(n, radius, lo, hi, poly, params, rng):
-        pts = np.empty((0, 2))
+        d = len(lo)
+        pts = np.empty((0, d))
         # a radius off the walls; from the inflow to the outflow in x, as the stream fills it
-        # (a gap there would travel down the channel as a hole in the stream)
-        a, b = lo + np.array([0.0, radius]), hi - np.array([0.0, radius])
+        # (a gap there would travel down the channel as a hole in the stream); all of the
+        # periodic span in 3-D
+        off = np.zeros(d)
+        off[1] = radius
+        a, b = lo + off, hi - off
         box_lo, box_hi = poly.min(axis=0) - radius, poly.max(axis=0) + radius
         while len(pts) < n:
-            p = rng.uniform(a, b, (int(1.2 * (n - len(pts))) + 16, 2))
-            near = np.all((p > box_lo) & (p < box_hi), axis=1)
+            p = rng.uniform(a, b, (int(1.2 * (n - len(pts))) + 16, d))
+            near = np.all((p[:, :2] > box_lo) & (p[:, :2] < box_hi), axis=1)
             keep = np.ones(len(p), dtype=bool)
             if near.any():
-                keep[near] = signed_distance(poly, p[near]) > radius
+                keep[near] = signed_distance(poly, p[near][:, :2]) > radius
             pts = np.concatenate([pts, p[keep]])
         pos = pts[:n]
         U = params["speed"]
@@ -392,9 +542,11 @@ class WindTunnel(Kind):
     # reading -------------------------------------------------------------------------
     def state(self, sim, s: dict[str, Any]) -> dict[str, Any]:
         f = s["airfoil_force"]
+        b = float(sim.info["span"]) if self.dim == 3 else None  # lift, drag, moment per unit span
+        per = (lambda x: float(x) / b) if b else float
         return {"time": s["time"], "end_time": s["end_time"], "step": s["step"], "dt": s["dt"],
                 "done": bool(s["done"]), "bad": s["bad"], "bad_step": s["bad_step"],
-                "lift": float(f[1]), "drag": float(f[0]), "moment": float(s["airfoil_moment"]),
+                "lift": per(f[1]), "drag": per(f[0]), "moment": per(s["airfoil_moment"]),
                 "airfoil_contacts": int(s["airfoil_contacts"]), "wall_force": list(s["wall_force"]),
                 "total_force": list(s["total_force"]), "kinetic_energy": float(s["sums_ke"]),
                 "vmax": float(s["vmax"]), "recycled": int(s["recycled"]), "pushouts": int(s["pushouts"]),
@@ -411,8 +563,11 @@ class WindTunnel(Kind):
         means: the blocks are long against the force's correlation time)."""
         nb = int(s["nblocks"])
         out: dict[str, Any] = {"blocks": nb, "block_time": float(s["block_len"])}
+        span = float(sim.info["span"]) if self.dim == 3 else 1.0  # per unit span (3-D: the whole span's / span)
         for name, key in (("lift", "blocks_lift"), ("drag", "blocks_drag"), ("moment", "blocks_moment")):
             b = np.asarray(s[key], dtype=np.float64)[:nb]
+            if self.dim == 3:
+                b = b / span
             out[name] = float(b.mean()) if nb else float("nan")
             out[name + "_se"] = float(b.std(ddof=1) / math.sqrt(nb)) if nb > 1 else float("nan")
         return out
@@ -435,25 +590,31 @@ class WindTunnel(Kind):
 
     def header(self, sim) -> dict[str, Any]:
         p = sim.params
+        airfoil = {"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
+                   "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"]),
+                   "angle_of_attack": float(sim.scene.values["airfoil.angle_of_attack"]),
+                   # the control's pitch turns it (nose up: clockwise) about the quarter chord
+                   "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}
+        if self.dim == 3:
+            # the section (x, y points) extruded along z across the whole (periodic) span
+            airfoil["extrude"] = [float(p["channel_lo"][2]), float(p["channel_hi"][2])]
+            airfoil["periodic"] = [False, False, True]
+        extra = {"up": "+y"} if self.dim == 3 else {}  # the walls are bottom and top (a view's up), z the span
         return {"container": {"type": "box", "min": list(p["channel_lo"]), "max": list(p["channel_hi"])},
-                "obstacles": [{"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
-                               "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"]),
-                               "angle_of_attack": float(sim.scene.values["airfoil.angle_of_attack"]),
-                               # the control's pitch turns it (nose up: clockwise) about the quarter chord
-                               "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}],
+                "obstacles": [airfoil], **extra,
                 "bodies": [], "particles": sim.n_particles, "particle_radius": sim.info["radius"],
-                "mass": sim.info["mass"], "free_stream": [p["speed"], 0.0], "units": dict(self.units),
-                "render": self.render_defaults(sim)}
+                "mass": sim.info["mass"], "free_stream": [p["speed"]] + [0.0] * (self.dim - 1),
+                "units": dict(self.units), "render": self.render_defaults(sim)}
 
-    @staticmethod
-    def render_defaults(sim) -> dict[str, Any]:
+    def render_defaults(self, sim) -> dict[str, Any]:
         """How render and the live viewer colour this kind by default: the number density on a
-        fixed range from the free stream's, 0 to RENDER_DENSITY_SPAN times N / free area. The
-        seed's pressure (contact-force sums) is zero for nearly every particle of the stream,
-        so it showed black on black; the density shows the compressed layer ahead of and under
-        the airfoil (the bow shock, saturating), the stream (a quarter of the ramp) and the
-        rarefied wake behind it (dark)."""
-        n0 = sim.n_particles / float(sim.info["free_area"])
+        fixed range from the free stream's, 0 to RENDER_DENSITY_SPAN times N / free area (3-D:
+        free volume). The seed's pressure (contact-force sums) is zero for nearly every
+        particle of the stream, so it showed black on black; the density shows the compressed
+        layer ahead of and under the airfoil (saturating), the stream (a quarter of the ramp)
+        and the rarefied wake behind it (dark)."""
+        free = float(sim.info["free_volume"] if self.dim == 3 else sim.info["free_area"])
+        n0 = sim.n_particles / free
         return {"color": "number_density", "range": [0.0, RENDER_DENSITY_SPAN * n0], "log": False, "ramp": "heat",
                 "free_stream_density": n0}
 

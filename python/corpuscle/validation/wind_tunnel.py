@@ -46,6 +46,18 @@ means over the samples), combined; a correct simulation fails a check with proba
 6e-5. The sampling error is shot noise of the particles hitting the body: at the default
 10,000 particles and a 0.3 s window it is 2 to 5 % of C_N; --full (2,097,152 particles
 on the GPU, a 1 s window, contacts 2.5 times stiffer) makes it about 25 times smaller.
+
+--dim 3 runs the same checks on the 3-D kind (wind-tunnel-3d): a span-periodic channel
+(SPAN_3D deep) and the plate extruded across it, the free stream a 3-D drifting Maxwellian.
+The theory is the same per unit span: the force on a surface element whose normal lies in
+the x-y plane depends only on the distribution of the velocity component along that normal
+(the incident fluxes), and the frictionless wall keeps the tangential components, z among
+them. The marginal of one component of a 3-D drifting Maxwellian f ~ exp(-|c - U|^2 / c_m^2)
+along any unit vector n is the 1-D Maxwellian exp(-(w - U.n)^2 / c_m^2) / (sqrt(pi) c_m), the
+2-D gas's marginal (the exponent separates in an orthonormal basis containing n; the other
+factors integrate to one), so p_i and C_p(s_n) of corpuscle.free_molecular hold unchanged
+with rho the mass per volume (the simulation counts n_inf in a strip's volume). The measured
+force is the whole span's over the span.
 """
 
 from __future__ import annotations
@@ -59,7 +71,8 @@ import numpy as np
 from .. import free_molecular as fm
 from . import Check
 
-DEFAULT_PARTICLES = 10_000
+DEFAULT_PARTICLES = 10_000  # both dimensions: the hits on the plate, and so the error, do not depend on the span
+SPAN_3D = 0.1  # m: the 3-D channel's periodic span (10 radii)
 FULL_PARTICLES = 2_097_152
 COLD_ALPHAS = (10.0, 30.0, 45.0)
 MAXWELL_ALPHAS = (0.0, 20.0, 45.0)
@@ -146,6 +159,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--speed-ratio", type=_positive_float("--speed-ratio"), default=2.0,
                         help="speed ratio S = U / sqrt(2kT/m) of the Maxwellian stream (default 2; >= 1.5)")
     parser.add_argument("--seed", type=int, default=1, help="random seed")
+    parser.add_argument("--dim", type=int, choices=(2, 3), default=2,
+                        help="2: the wind-tunnel kind (default); 3: wind-tunnel-3d, the plate spanning a periodic channel")
 
 
 # ---------------------------------------------------------------------------
@@ -153,8 +168,14 @@ def add_arguments(parser) -> None:
 # ---------------------------------------------------------------------------
 
 
+def scene_name(dim: int) -> str:
+    """The built-in scene (and kind) of the dimension."""
+    return "wind-tunnel" if dim == 2 else "wind-tunnel-3d"
+
+
 def scene_overrides(shape: str, alpha: float, speed_ratio: float, restitution: float, particles: int,
-                    window: float, seed: int = 1, stiffness: float | None = None) -> tuple[dict[str, Any], dict[str, float]]:
+                    window: float, seed: int = 1, stiffness: float | None = None,
+                    dim: int = 2) -> tuple[dict[str, Any], dict[str, float]]:
     """The scene keys of one free-molecular run and its time-stepping numbers."""
     S = speed_ratio
     umax = SPEED * (1.0 + 2.5 / S) if math.isfinite(S) else SPEED
@@ -177,24 +198,29 @@ def scene_overrides(shape: str, alpha: float, speed_ratio: float, restitution: f
         "run.end_time": end, "run.seed": int(seed), "measure.start": T_START / end,
         "measure.block_time": window / 64.0,
     }
+    if dim == 3:
+        ov["channel.span"] = SPAN_3D
     return ov, {"dt": dt, "omega": omega, "end": end, "wdt": wdt}
 
 
 def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, particles: int, backend: str,
-            window: float, seed: int = 1, stiffness: float | None = None) -> dict[str, Any]:
-    """Run one collisionless case; the measured C_L, C_D, C_N, C_A with standard errors."""
+            window: float, seed: int = 1, stiffness: float | None = None, dim: int = 2) -> dict[str, Any]:
+    """Run one collisionless case; the measured C_L, C_D, C_N, C_A with standard errors
+    (dim 3: per unit span of the 3-D kind)."""
     from ..scene import load_scene
     from ..simulation import Simulation
 
-    ov, num = scene_overrides(shape, alpha, speed_ratio, restitution, particles, window, seed, stiffness)
-    sim = Simulation.from_scene(load_scene("wind-tunnel"), backend=backend, overrides=ov)
+    ov, num = scene_overrides(shape, alpha, speed_ratio, restitution, particles, window, seed, stiffness, dim)
+    sim = Simulation.from_scene(load_scene(scene_name(dim)), backend=backend, overrides=ov)
     sim.set_end_time(num["end"])
     poly = sim.info["airfoil"]
     lo, hi = np.asarray(sim.params["channel_lo"]), np.asarray(sim.params["channel_hi"])
     r = float(sim.params["radius"])
     strip_hi = float(poly[:, 0].min()) - r - 0.02
     strip_lo = float(lo[0])
-    strip_area = (strip_hi - strip_lo) * (hi[1] - lo[1] - 2.0 * r)
+    strip_area = (strip_hi - strip_lo) * (hi[1] - lo[1] - 2.0 * r)  # 3-D: a volume, times the span
+    span = float(hi[2] - lo[2]) if dim == 3 else 1.0
+    strip_area *= span
     if strip_hi - lo[0] < 0.05:
         raise ValueError(f"no free-stream strip ahead of the body at alpha = {alpha}")
     chunk = max(1, int(round(min(0.005, window / 64.0) / num["dt"])))  # a density sample every 5 ms (or window/64)
@@ -218,8 +244,9 @@ def measure(shape: str, alpha: float, speed_ratio: float, restitution: float, pa
     nb = int(sc["nblocks"])
     if nb < 8:
         raise ValueError(f"--time {window:g}: only {nb} force blocks were closed; give a longer window")
-    lift = np.asarray(sc["blocks_lift"], dtype=np.float64)[:nb]
-    drag = np.asarray(sc["blocks_drag"], dtype=np.float64)[:nb]
+    # per unit span (3-D: the whole span's force over the span)
+    lift = np.asarray(sc["blocks_lift"], dtype=np.float64)[:nb] / span
+    drag = np.asarray(sc["blocks_drag"], dtype=np.float64)[:nb] / span
     # The stream reaching the body at time t passed the strip a transit time tau earlier (the
     # free-stream density is not constant while the channel settles: the body's shadow holds
     # fewer particles than the start's uniform gas, and the inflow, fed by the outflow, rings
@@ -323,16 +350,20 @@ def run(args) -> list[Check]:
         raise ValueError(f"--speed-ratio = {S:g}: at least 1.5 (the channel's stream lacks the particles moving "
                          f"upstream, a fraction erfc(S)/2 that is no longer negligible below that)")
     seed = int(getattr(args, "seed", 1))
+    dim = int(getattr(args, "dim", 2) or 2)
+    if dim not in (2, 3):
+        raise ValueError(f"--dim = {dim}: 2 or 3")
     backend = _backend(args)
     alphas = getattr(args, "alpha", None)
     checks: list[Check] = []
+    where = f"wind-tunnel-3d, periodic span {SPAN_3D:g} m, per unit span; " if dim == 3 else ""
 
     def plate(label, S_, e_, alist):
         for k, a in enumerate(alist):
-            m = measure("flat-plate", a, S_, e_, particles, backend, window, seed + k, stiffness)
+            m = measure("flat-plate", a, S_, e_, particles, backend, window, seed + k, stiffness, dim)
             # the theory with the restitution the discrete contact returns (1.3 % lower at omega dt 0.2)
             th = theory(m["polygon"], m["radius"], a, S_, m["restitution"])
-            info = (f"thin plate C_N {th['thin_cn']:.4f}; offset body (r = {m['radius']:g} m, t = {THICKNESS:g} c); "
+            info = (where + f"thin plate C_N {th['thin_cn']:.4f}; offset body (r = {m['radius']:g} m, t = {THICKNESS:g} c); "
                     f"e of the discrete contact {m['restitution']:.4f}; n_inf se {100 * m['n_inf_rel_se']:.2f} %; "
                     f"{m['blocks']} blocks; pushouts {m['pushouts']}")
             checks.append(_check(f"{label} C_N(alpha={a:g})", m["cn"], m["cn_se"], th["cn"], info))
@@ -344,9 +375,9 @@ def run(args) -> list[Check]:
         plate(f"maxwell S={S:g}", S, 1.0, alphas or MAXWELL_ALPHAS)
     if "symmetric" in cases:
         a = 10.0
-        p = measure("naca0012", a, S, 1.0, particles, backend, window, seed + 100, stiffness)
-        n = measure("naca0012", -a, S, 1.0, particles, backend, window, seed + 200, stiffness)
-        info = f"naca0012 at +-{a:g} deg, maxwell S={S:g}, specular"
+        p = measure("naca0012", a, S, 1.0, particles, backend, window, seed + 100, stiffness, dim)
+        n = measure("naca0012", -a, S, 1.0, particles, backend, window, seed + 200, stiffness, dim)
+        info = where + f"naca0012 at +-{a:g} deg, maxwell S={S:g}, specular"
         checks.append(Check(f"naca0012 C_L(+{a:g}) = -C_L(-{a:g})", p["cl"], -n["cl"],
                             Z * math.hypot(p["cl_se"], n["cl_se"]),
                             abs(p["cl"] + n["cl"]) <= Z * math.hypot(p["cl_se"], n["cl_se"]), "", info))

@@ -42,6 +42,7 @@ CPS_UNARY_MATH(fexp, expf, std::exp)
 CPS_UNARY_MATH(fcos, cosf, std::cos)
 CPS_UNARY_MATH(fsin, sinf, std::sin)
 CPS_UNARY_MATH(ferf, erff, std::erf)
+CPS_UNARY_MATH(ffloor, floorf, std::floor)
 #undef CPS_UNARY_MATH
 CPS_HD CPS_INLINE float fmin2(float a, float b) { return a < b ? a : b; }
 CPS_HD CPS_INLINE float fmax2(float a, float b) { return a > b ? a : b; }

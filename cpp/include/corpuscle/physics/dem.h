@@ -22,7 +22,8 @@
 // F = 0, which gives a different e). With zeta >= 1 (overdamped) the pair never separates
 // with a positive speed: e = 0, t_c infinite.
 //
-// The law is dimension-generic (template <int D>); the polygon contact is 2-D.
+// The law is dimension-generic (template <int D>); the polygon contact is 2-D (the 3-D wind
+// tunnel's airfoil is the polygon extruded along z: its contact is the 2-D one in x-y).
 #pragma once
 #include <cmath>
 
@@ -71,16 +72,16 @@ CPS_HD CPS_INLINE float normal_force(const SpringDashpot& law, float overlap, fl
   return law.k * overlap + law.c * approach;
 }
 
-// The force on particle i from particle j (j gets its negative: Newton's third law).
+// The force on particle i from particle j (j gets its negative: Newton's third law), from the
+// displacement d = x_j - x_i (a periodic image's displacement, computed as (x_j - x_i) minus the
+// image shift, so the pair's two displacements are exact negatives of each other).
 // Returns false (force zero) when they do not overlap, or when the centres coincide to
 // within 1e-6 of the contact distance, where the normal is undefined (the seed skipped
 // |x_j - x_i|^2 < 1e-8, an absolute length; this one is relative to the radii).
 // `magnitude` is |F|, the pair's contribution to each particle's "pressure".
 template <int D>
-CPS_HD CPS_INLINE bool pair_contact_force(const SpringDashpot& law, const Vec<D>& xi, const Vec<D>& vi, float ri,
-                                          const Vec<D>& xj, const Vec<D>& vj, float rj, Vec<D>& f_on_i,
-                                          float& magnitude) {
-  Vec<D> d = xj - xi;
+CPS_HD CPS_INLINE bool pair_contact_force_d(const SpringDashpot& law, const Vec<D>& d, const Vec<D>& vi, float ri,
+                                            const Vec<D>& vj, float rj, Vec<D>& f_on_i, float& magnitude) {
   float reach = ri + rj;
   float r2 = norm2(d);
   f_on_i = Vec<D>::zero();
@@ -93,6 +94,13 @@ CPS_HD CPS_INLINE bool pair_contact_force(const SpringDashpot& law, const Vec<D>
   f_on_i = n * (-F);
   magnitude = F < 0.0f ? -F : F;
   return true;
+}
+// the same from the two positions (d = x_j - x_i)
+template <int D>
+CPS_HD CPS_INLINE bool pair_contact_force(const SpringDashpot& law, const Vec<D>& xi, const Vec<D>& vi, float ri,
+                                          const Vec<D>& xj, const Vec<D>& vj, float rj, Vec<D>& f_on_i,
+                                          float& magnitude) {
+  return pair_contact_force_d<D>(law, xj - xi, vi, ri, vj, rj, f_on_i, magnitude);
 }
 
 // A particle against a wall or body: signed distance `sd` of the particle's centre from the

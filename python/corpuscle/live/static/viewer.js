@@ -174,7 +174,18 @@
       if (ob.turn && typeof ob.turn === 'object' && Array.isArray(ob.turn.about)) {
         o.turn = { diagnostic: String(ob.turn.diagnostic || ''), about: pad3(ob.turn.about), sign: +(ob.turn.sign ?? 1) };
       }
-      if (Array.isArray(ob.points) && ob.points.length >= 2) {
+      if (Array.isArray(ob.points) && ob.points.length >= 2 && Array.isArray(ob.extrude) && ob.extrude.length === 2 && S.dim === 3) {
+        // an x-y section swept along z (the 3-D wind tunnel's airfoil): its outline at both ends,
+        // joined at the section's two extreme vertices in x (leading and trailing edge)
+        const [z0, z1] = ob.extrude.map(Number), n = ob.points.length;
+        let a = 0, b = 0;
+        ob.points.forEach((p, i) => { if (p[0] < ob.points[a][0]) a = i; if (p[0] > ob.points[b][0]) b = i; });
+        for (const z of [z0, z1]) for (let i = 0; i < n; i++) {
+          const p = ob.points[i], q = ob.points[(i + 1) % n];
+          o.lines.push(p[0], p[1], z, q[0], q[1], z);
+        }
+        for (const i of [a, b]) o.lines.push(ob.points[i][0], ob.points[i][1], z0, ob.points[i][0], ob.points[i][1], z1);
+      } else if (Array.isArray(ob.points) && ob.points.length >= 2) {
         const pts = ob.points.map(pad3), n = pts.length;
         for (let i = 0; i < n; i++) o.lines.push(...pts[i], ...pts[(i + 1) % n]);
         if (ob.points[0].length === 2 || S.dim === 2) triangulate(pts).forEach((p) => o.fill.push(p[0], p[1], 0));

@@ -1,5 +1,7 @@
 // The wind tunnel built from its parameters (SI values, as python/corpuscle/kinds/
-// wind_tunnel.py writes them) and made on an Exec with an index plug-in.
+// wind_tunnel.py writes them) and made on an Exec with an index plug-in; D = 2 is the kind
+// `wind-tunnel`, D = 3 `wind-tunnel-3d` (the same parameters, with 3-component channel
+// corners: z is the periodic span).
 #pragma once
 #include <memory>
 #include <string>
@@ -12,54 +14,79 @@
 
 namespace cps::wt {
 
-inline Vec2 vec2(const ParamSource& p, const std::string& key) {
+template <int D>
+inline Vec<D> vecd(const ParamSource& p, const std::string& key, const std::string& kind) {
   auto v = p.numbers(key);
-  if (v.size() != 2) throw Error("wind-tunnel: parameter '" + key + "' needs 2 numbers");
-  return Vec2{{float(v[0]), float(v[1])}};
+  if (int(v.size()) != D) throw Error(kind + ": parameter '" + key + "' needs " + std::to_string(D) + " numbers");
+  Vec<D> r;
+  for (int k = 0; k < D; ++k) r[k] = float(v[k]);
+  return r;
 }
 
 // the model; the airfoil polygon (counter-clockwise vertices, (n, 2)) comes as an array
-inline Model build_model(const ParamSource& p, const ArraySource* arrays) {
-  Model m{};
+template <int D>
+inline Model<D> build_model(const ParamSource& p, const ArraySource* arrays) {
+  const std::string kind = kind_name<D>();
+  Model<D> m{};
   m.n = int(p.integer("n"));
   m.integrator = int(p.integer("integrator"));
   if (m.integrator != kForwardEuler && m.integrator != kSymplecticEuler)
-    throw Error("wind-tunnel: integrator must be 0 (forward Euler) or 1 (symplectic Euler)");
+    throw Error(kind + ": integrator must be 0 (forward Euler) or 1 (symplectic Euler)");
   m.radius = p.f("radius");
   m.cell = p.has("cell") ? p.f("cell") : 0.0f;
-  if (!(m.cell >= 0.0f) || !finite(m.cell)) throw Error("wind-tunnel: cell must be finite and not negative");
+  if (!(m.cell >= 0.0f) || !finite(m.cell)) throw Error(kind + ": cell must be finite and not negative");
   m.lbvh_stack = p.has("lbvh_stack") ? int(p.integer("lbvh_stack")) : kLbvhStack;
   if (m.lbvh_stack < 1 || m.lbvh_stack > kLbvhMaxStack)
-    throw Error("wind-tunnel: lbvh_stack must be 1 to " + std::to_string(kLbvhMaxStack) + ", got " +
+    throw Error(kind + ": lbvh_stack must be 1 to " + std::to_string(kLbvhMaxStack) + ", got " +
                 std::to_string(m.lbvh_stack));
   m.mass = p.f("mass");
   m.collide = p.has("collide") ? int(p.integer("collide") != 0) : 1;
   m.reflexive = p.has("reflexive") ? int(p.integer("reflexive")) : 0;
-  if (m.reflexive < 0 || m.reflexive > 2) throw Error("wind-tunnel: reflexive must be 0, 1 or 2");
+  if (m.reflexive < 0 || m.reflexive > 2) throw Error(kind + ": reflexive must be 0, 1 or 2");
   m.recycle_scattered = p.has("recycle_scattered") ? int(p.integer("recycle_scattered") != 0) : 0;
   m.pp = SpringDashpot{p.f("k"), p.f("c")};
   m.wall = SpringDashpot{p.f("k_wall"), p.f("c_wall")};
   m.wing = SpringDashpot{p.f("k_wing"), p.f("c_wing")};
-  m.lo = vec2(p, "channel_lo");
-  m.hi = vec2(p, "channel_hi");
+  m.lo = vecd<D>(p, "channel_lo", kind);
+  m.hi = vecd<D>(p, "channel_hi", kind);
   if (!(m.hi[0] > m.lo[0]) || !(m.hi[1] - m.lo[1] > 2.0f * m.radius))
-    throw Error("wind-tunnel: the channel must be wider than a particle");
+    throw Error(kind + ": the channel must be wider than a particle");
+  // the periodic span: at least two contact reaches, so that a particle meets another at most
+  // once (directly or through one image) and never itself (stages.h, span_image)
+  if (D == 3 && !(m.hi[D - 1] - m.lo[D - 1] >= 4.0f * m.radius * (1.0f + 1e-4f)))
+    throw Error(kind + ": the span (channel_hi[2] - channel_lo[2] = " + std::to_string(m.hi[D - 1] - m.lo[D - 1]) +
+                ") must be at least 4 particle radii (" + std::to_string(4.0f * m.radius) + ")");
   m.speed = p.f("speed");
   m.thermal = p.f("thermal");
   m.dt_fraction = p.f("dt_fraction");
   m.dt_max = p.f("dt_max");
-  m.quarter_chord = vec2(p, "quarter_chord");
+  m.quarter_chord = vecd<2>(p, "quarter_chord", kind);
   m.measure_start = p.number("measure_start");
   m.block_time = p.number("block_time");
-  if (!(m.block_time > 0.0)) throw Error("wind-tunnel: block_time must be positive");
+  if (!(m.block_time > 0.0)) throw Error(kind + ": block_time must be positive");
   m.seed = unsigned(p.integer("seed") & 0xffffffffLL);
+  m.conv_rows = p.has("conv_rows") ? int(p.integer("conv_rows")) : 0;
+  if (m.conv_rows < 0 || m.conv_rows > kMaxRows)
+    throw Error(kind + ": conv_rows must be 0 to " + std::to_string(kMaxRows));
+  if (m.conv_rows > 0) {
+    m.conv_ny = p.has("conv_ny") ? int(p.integer("conv_ny")) : m.conv_rows;
+    m.conv_y0 = p.f("conv_y0");
+    m.conv_dy = p.f("conv_dy");
+    m.conv_dx = p.f("conv_dx");
+    m.conv_z0 = p.has("conv_z0") ? p.f("conv_z0") : 0.0f;
+    m.conv_dz = p.has("conv_dz") ? p.f("conv_dz") : 1.0f;
+    if (m.conv_ny <= 0 || m.conv_rows % m.conv_ny != 0 || (D == 2 && m.conv_ny != m.conv_rows))
+      throw Error(kind + ": conv_ny must divide conv_rows (and equal it in 2-D)");
+    if (!(m.conv_dx > 2.0f * m.radius) || !(m.conv_dy > 2.0f * m.radius) || (D == 3 && !(m.conv_dz > 2.0f * m.radius)))
+      throw Error(kind + ": the inflow conveyor's slots must be more than a diameter apart");
+  }
   m.n_edges = 0;
   m.bbox = Box2{{{1e30f, 1e30f}}, {{-1e30f, -1e30f}}};
   if (arrays && arrays->has("airfoil")) {
     ArrayView a = arrays->get("airfoil");
-    if (a.components != 2 || a.count < 3) throw Error("wind-tunnel: the airfoil array must be (n >= 3, 2)");
+    if (a.components != 2 || a.count < 3) throw Error(kind + ": the airfoil array must be (n >= 3, 2)");
     if (a.count > kMaxEdges)
-      throw Error("wind-tunnel: the airfoil has " + std::to_string(a.count) + " vertices, at most " +
+      throw Error(kind + ": the airfoil has " + std::to_string(a.count) + " vertices, at most " +
                   std::to_string(kMaxEdges));
     PolygonVertices P{a.data, int(a.count)};
     polygon_write_edges(P, m.edges);
@@ -69,18 +96,19 @@ inline Model build_model(const ParamSource& p, const ArraySource* arrays) {
   return m;
 }
 
-template <class Exec, class Index>
+template <class Exec, class Index, int D>
 std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
-  using P = Pipeline<std::decay_t<Exec>, Index>;
-  auto m = std::make_unique<Model>(build_model(*r.params, r.arrays));  // 32 KiB: not on the stack
+  using P = Pipeline<std::decay_t<Exec>, Index, D>;
+  const std::string kind = kind_name<D>();
+  auto m = std::make_unique<Model<D>>(build_model<D>(*r.params, r.arrays));  // 32 KiB: not on the stack
   auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), *m, std::vector<typename P::SceneRecord>{P::initial_record(*m)},
                                                               r.device);
   for (const char* name : {"position", "velocity"}) {
-    if (!r.arrays || !r.arrays->has(name)) throw Error(std::string("wind-tunnel: no initial ") + name + " array");
+    if (!r.arrays || !r.arrays->has(name)) throw Error(kind + ": no initial " + name + " array");
     ArrayView a = r.arrays->get(name);
-    if (a.components != 2 || a.count != m->n)
-      throw Error(std::string("wind-tunnel: the initial ") + name + " array must be (" + std::to_string(m->n) +
-                  ", 2)");
+    if (a.components != D || a.count != m->n)
+      throw Error(kind + ": the initial " + name + " array must be (" + std::to_string(m->n) + ", " +
+                  std::to_string(D) + ")");
     sim->upload(name, a.data, a.count);
   }
   return sim;
@@ -91,19 +119,33 @@ inline const std::vector<std::string>& index_names() {
   return names;
 }
 
+template <int D, class Exec>
+std::unique_ptr<Sim> make_dim(Exec&& ex, const SimRequest& r) {
+  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
+  if (idx == GridIndex::name) return make_with<Exec, GridIndex, D>(std::move(ex), r);
+  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex, D>(std::move(ex), r);
+  if (idx == LbvhIndex::name) return make_with<Exec, LbvhIndex, D>(std::move(ex), r);
+  throw Error(std::string(kind_name<D>()) + ": unknown index '" + idx + "' (indexes: grid, lbvh, allpairs)");
+}
+
+// is this one of the wind tunnel's kinds (wind-tunnel, wind-tunnel-3d)?
+inline bool is_kind(const std::string& k) { return k == kind_name<2>() || k == kind_name<3>(); }
+
+// the kind of r (wind-tunnel or wind-tunnel-3d)
 template <class Exec>
 std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
-  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
-  if (idx == GridIndex::name) return make_with<Exec, GridIndex>(std::move(ex), r);
-  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex>(std::move(ex), r);
-  if (idx == LbvhIndex::name) return make_with<Exec, LbvhIndex>(std::move(ex), r);
-  throw Error("wind-tunnel: unknown index '" + idx + "' (indexes: grid, lbvh, allpairs)");
+  if (r.kind == kind_name<3>()) return make_dim<3>(std::move(ex), r);
+  return make_dim<2>(std::move(ex), r);
 }
 
 template <class Exec>
 double bytes(const SimRequest& r) {
-  auto m = std::make_unique<Model>(build_model(*r.params, r.arrays));
-  return Pipeline<Exec, GridIndex>::bytes_needed(*m);
+  if (r.kind == kind_name<3>()) {
+    auto m = std::make_unique<Model<3>>(build_model<3>(*r.params, r.arrays));
+    return Pipeline<Exec, GridIndex, 3>::bytes_needed(*m);
+  }
+  auto m = std::make_unique<Model<2>>(build_model<2>(*r.params, r.arrays));
+  return Pipeline<Exec, GridIndex, 2>::bytes_needed(*m);
 }
 
 }  // namespace cps::wt

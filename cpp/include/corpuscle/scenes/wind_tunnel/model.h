@@ -1,7 +1,15 @@
-// The wind tunnel (seed 000): a 2-D soft-sphere gas streaming past an airfoil in a channel
-// with walls top and bottom; particles leaving on the right re-enter at the inflow with
-// free-stream statistics (constant count, steady flow); the reaction on the airfoil (lift,
-// drag, moment about the quarter chord) is summed every step and averaged in blocks.
+// The wind tunnel (seed 000): a soft-sphere gas streaming past an airfoil in a channel with
+// walls top and bottom; particles leaving on the right re-enter at the inflow with free-stream
+// statistics (constant count, steady flow); the reaction on the airfoil (lift, drag, moment
+// about the quarter chord) is summed every step and averaged in blocks.
+//
+// The dimension is a template parameter: D = 2 is the seed's scene (`wind-tunnel`); D = 3
+// (`wind-tunnel-3d`) is the same channel with a span along z, periodic (a particle leaving
+// through z = hi re-enters at z = lo, and contacts reach across: the span-periodic channel of a
+// 2-D section test, with no end walls and so no end-wall boundary layers), and the airfoil
+// section extruded across the whole span: its contact is the 2-D polygon one in x-y, the z
+// component untouched, and its force has no z component. Every stage is the same code for
+// both (stages.h); what differs is behind `if constexpr (D == 3)`.
 //
 // Model (constant), Scene (the per-scene record: clock, diagnostics, the block averages),
 // Control (the input of the next step) and Arrays (structure of arrays) are plain data.
@@ -14,15 +22,17 @@
 
 namespace cps::wt {
 
-constexpr int D = 2;
 constexpr int kMaxEdges = 1024;  // airfoil polygon capacity (edges): e398 has 61, naca4 200
 constexpr int kMaxBlocks = 64;   // block averages of the forces kept in the record
+constexpr int kMaxRows = 16384;  // inflow conveyor rows (the cold beam's lattice rows)
 
 constexpr int kForwardEuler = 0;     // x += v dt, v += a dt (the seed's)
 constexpr int kSymplecticEuler = 1;  // v += a dt, x += v dt
 
 // constant per-scene parameters
+template <int D>
 struct Model {
+  static_assert(D == 2 || D == 3, "the wind tunnel is 2-D or 3-D");
   int n;                 // particles
   int integrator;        // kForwardEuler / kSymplecticEuler
   float radius, mass;
@@ -36,19 +46,26 @@ struct Model {
   SpringDashpot pp;      // particle-particle
   SpringDashpot wall;    // particle-wall (top and bottom)
   SpringDashpot wing;    // particle-airfoil
-  Vec2 lo, hi;           // the channel: inflow x = lo[0], outflow x = hi[0], walls y = lo[1], hi[1]
+  Vec<D> lo, hi;         // the channel: inflow x = lo[0], outflow x = hi[0], walls y = lo[1], hi[1];
+                         // D = 3: the periodic span z in [lo[2], hi[2])
   float speed;           // free-stream speed U (along +x)
   float thermal;         // per-component thermal velocity spread / U (0: the seed's cold beam)
   float cell;            // the broad-phase grid's cell edge (m), at least a contact diameter
   int lbvh_stack;        // LBVH traversal stack entries per thread (shared memory on the device)
   float dt_fraction;     // the fastest particle moves at most this fraction of the radius per step
   float dt_max;
-  Vec2 quarter_chord;    // moment reference point
+  Vec2 quarter_chord;    // moment reference point (in x-y; D = 3: the quarter-chord line along z)
   double measure_start;  // s: forces are averaged from here on (the steady part)
   double block_time;     // s: initial length of an averaging block (doubled when all are full)
   unsigned seed;         // re-entry random numbers
+  // the cold beam's inflow (stages.h, "The inflow conveyor"): a lattice of slots moving in at
+  // the stream's speed, conv_rows rows, conv_ny heights dy apart from conv_y0 (D = 3: in
+  // conv_rows / conv_ny layers dz apart from conv_z0 across the span), columns dx apart; 0 rows:
+  // re-entry at a uniformly random height (a thermal or collisionless gas)
+  int conv_rows, conv_ny;
+  float conv_y0, conv_dy, conv_dx, conv_z0, conv_dz;
   int n_edges;
-  Box2 bbox;             // of the airfoil, widened by the radius
+  Box2 bbox;             // of the airfoil (in x-y)
   float edges[kEdgeStride * kMaxEdges];  // polygon edge records (polygon.h)
   PolygonGridCells foil_cells;  // the edges' grid (polygon_grid.h; its tables: the pipeline's buffers)
   CPS_HD PolygonEdges airfoil() const { return PolygonEdges{edges, n_edges}; }
@@ -57,19 +74,21 @@ struct Model {
 };
 
 // per-step reductions (combined in a fixed order per backend)
+template <int D>
 struct StepSums {
   float vmax2;       // largest squared speed
   float ke;          // kinetic energy
-  Vec2 force;        // on the airfoil (minus the particles' airfoil contact forces)
-  float moment;      // on the airfoil about the quarter chord (counter-clockwise = nose up)
-  Vec2 wall_force;   // the walls' forces on the particles
-  Vec2 total_force;  // every contact force on the particles (pairs cancel)
+  Vec<D> force;      // on the airfoil (minus the particles' airfoil contact forces; D = 3: the whole
+                     // span's, z component 0)
+  float moment;      // on the airfoil about the quarter chord (counter-clockwise = nose up; about z)
+  Vec<D> wall_force;   // the walls' forces on the particles
+  Vec<D> total_force;  // every contact force on the particles (pairs cancel)
   int contacts;      // particles touching the airfoil
 
   CPS_HD static StepSums identity() {
     StepSums s;
     s.vmax2 = s.ke = s.moment = 0.0f;
-    s.force = s.wall_force = s.total_force = Vec2::zero();
+    s.force = s.wall_force = s.total_force = Vec<D>::zero();
     s.contacts = 0;
     return s;
   }
@@ -85,8 +104,11 @@ struct StepSums {
     return s;
   }
 };
+template <int D>
 struct SumsOp {
-  CPS_HD StepSums operator()(const StepSums& a, const StepSums& b) const { return StepSums::combine(a, b); }
+  CPS_HD StepSums<D> operator()(const StepSums<D>& a, const StepSums<D>& b) const {
+    return StepSums<D>::combine(a, b);
+  }
 };
 
 constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
@@ -99,10 +121,11 @@ struct Control {
 };
 
 // the per-scene record
+template <int D>
 struct Scene {
   Clock clock;
-  StepSums sums;        // the last step's reductions (diagnostics)
-  StepSums pending;     // this step's, kept in sums once the step is taken
+  StepSums<D> sums;     // the last step's reductions (diagnostics)
+  StepSums<D> pending;    // this step's, kept in sums once the step is taken
   float step_dt;        // the dt this step integrates with (0: not taken)
   long long recycled;   // particles re-entered at the inflow so far
   long long pushouts;   // particles projected out of the airfoil or back into the channel
@@ -112,18 +135,27 @@ struct Scene {
   int nblocks;          // full blocks
   double cur_t, cur_lift, cur_drag, cur_moment;  // the block in progress
   double blk_lift[kMaxBlocks], blk_drag[kMaxBlocks], blk_moment[kMaxBlocks];  // block means
+  // the inflow conveyor: how far the stream has moved in since t = 0 (the slots' phase), the
+  // next free column of each row, each row's claim of this step (the smallest id wanting it;
+  // INT_MAX between steps) and this step's leaving particles
+  double inflow_x;
+  int conv_next[kMaxRows];
+  int conv_claim[kMaxRows];
+  int n_leaving;
 };
 
 // structure of arrays; particles sorted by cell every step
+template <int D>
 struct Arrays {
-  Vec2 *pos, *vel, *pos_alt, *vel_alt;
+  Vec<D> *pos, *vel, *pos_alt, *vel_alt;
   int *id, *id_alt;
   int *scattered, *scattered_alt;  // 1: touched the airfoil since it (re-)entered
-  float* number_density;           // particles per unit area around each (grid cell block)
-  Vec2* force;       // contact force on each particle (this step)
+  float* number_density;           // particles per unit area (D = 3: volume) around each (grid cell block)
+  Vec<D>* force;      // contact force on each particle (this step)
   float* pressure;   // sum of contact-force magnitudes (the seed's "pressure")
   int* contacts;     // overlapping neighbours, walls and airfoil
-  StepSums* items;
+  StepSums<D>* items;
+  int* leaving;      // this step's leaving particles (slots; -1 once placed on the conveyor)
 };
 
 }  // namespace cps::wt

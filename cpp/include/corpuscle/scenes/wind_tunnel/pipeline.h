@@ -1,11 +1,12 @@
 // The wind tunnel pipeline: its buffers, the order of its stages for one step, the views.
 // SimImpl (sim/sim_impl.h) owns the Exec, the per-scene record and the control.
 //
-// A step: the 2-D cell grid keys the current positions and sorts them (CellGrid<2, Exec>),
+// A step: the D-dimensional cell grid keys the current positions and sorts them (CellGrid<D, Exec>),
 // the particle arrays are gathered into cell order in the other buffers, the cell ranges
 // marked; then the contact forces by gather, the reductions and the per-scene finalize
 // (dt, block averages, clock), and the integration (with recycling) in place. The sorted
-// buffers are current afterwards. Index plug-in: the grid (the only one so far).
+// buffers are current afterwards. Index plug-ins: the grid, the LBVH and all pairs. D = 2 is
+// `wind-tunnel`, D = 3 `wind-tunnel-3d` (model.h).
 #pragma once
 #include <cmath>
 #include <string>
@@ -33,13 +34,24 @@ struct LbvhIndex {
   static constexpr bool kGrid = false;
 };
 
-template <class Exec, class Index>
+// the kind's name of each dimension
+template <int D>
+constexpr const char* kind_name() {
+  return D == 2 ? "wind-tunnel" : "wind-tunnel-3d";
+}
+
+template <class Exec, class Index, int Dim = 2>
 class Pipeline {
  public:
+  static constexpr int D = Dim;
   template <class T> using Buf = typename Exec::template Buffer<T>;
+  using Model = wt::Model<D>;
+  using Scene = wt::Scene<D>;
+  using StepSums = wt::StepSums<D>;
+  using Arrays = wt::Arrays<D>;
   using SceneRecord = Scene;
   using ControlRecord = Control;
-  static constexpr const char* kind = "wind-tunnel";
+  static constexpr const char* kind = kind_name<D>();
   static constexpr const char* index_name = Index::name;
   static constexpr int kNumStages = 6;
   static const char* stage_name(int s) {
@@ -55,8 +67,8 @@ class Pipeline {
 
   static double bytes_needed(const Model& m) {
     const double n = m.n;
-    const double per = 2 * (2 * sizeof(Vec2) + 2 * sizeof(int)) + sizeof(Vec2) + 2 * sizeof(float) + sizeof(int) +
-                       sizeof(StepSums) + 4 * sizeof(uint64_t) + 2 * sizeof(int);
+    const double per = 2 * (2 * sizeof(Vec<D>) + 2 * sizeof(int)) + sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int) +
+                       sizeof(StepSums) + 4 * sizeof(uint64_t) + 3 * sizeof(int);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
     return n * per + cells + sizeof(Model);
   }
@@ -66,7 +78,7 @@ class Pipeline {
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u)
       : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)), tree_(m.lo, m.hi, 2.0f * m.radius * (1.0f + 1e-6f)) {
     const int n = m.n;
-    if (n <= 0) throw Error("wind-tunnel: no particles");
+    if (n <= 0) throw Error(std::string(kind) + ": no particles");
     if (m_.n_edges > 0) {
       // the airfoil's edge grid, built once and copied to the backend with the model
       const PolygonGridTables t = build_polygon_grid(m_.airfoil(), m_.radius);
@@ -92,6 +104,7 @@ class Pipeline {
     ndens_.resize(n);
     contacts_.resize(n);
     items_.resize(n);
+    leaving_.resize(n);
   }
 
   static Scene initial_record(const Model& m) {
@@ -99,11 +112,14 @@ class Pipeline {
     s.clock = start_clock();
     s.sums = s.pending = StepSums::identity();
     s.block_len = m.block_time;
+    for (int r = 0; r < kMaxRows; ++r) s.conv_claim[r] = kNoClaim;
     return s;
   }
   static void restored(Scene& r) {
     r.pending = r.sums;
     r.step_dt = 0.0f;
+    r.n_leaving = 0;
+    for (int k = 0; k < kMaxRows; ++k) r.conv_claim[k] = kNoClaim;  // no claim between steps
   }
 
   long long particles() const { return m_.n; }
@@ -131,18 +147,18 @@ class Pipeline {
     if (m_.collide && kTree) {
       tree_.sort(ex_, pos_[cur].data(), n);
       ex_.mark(0);
-      ex_.for_each(n, ReorderStage{tree_.order(), arrays(cur, nxt)});
+      ex_.for_each(n, ReorderStage<D>{tree_.order(), arrays(cur, nxt)});
       ex_.mark(1);
       tree_.build(ex_, pos_[nxt].data());
     } else if (m_.collide && Index::kGrid) {
       grid_.sort(ex_, pos_[cur].data(), nullptr, n);
       ex_.mark(0);
-      ex_.for_each(n, ReorderStage{grid_.order(), arrays(cur, nxt)});
+      ex_.for_each(n, ReorderStage<D>{grid_.order(), arrays(cur, nxt)});
       ex_.mark(1);
       grid_.mark(ex_);
     } else {
       ex_.mark(0);
-      ex_.for_each(n, ReorderStage{nullptr, arrays(cur, nxt)});
+      ex_.for_each(n, ReorderStage<D>{nullptr, arrays(cur, nxt)});
       ex_.mark(1);
     }
     ex_.mark(2);
@@ -156,10 +172,10 @@ class Pipeline {
         else ex_.for_each(n, f);
       };
       if (m_.collide && m_.reflexive) {
-        ex_.for_each(n, ZeroContactsStage{s});
-        walking(PairStage<V>{md, g, s, view});
+        ex_.for_each(n, ZeroContactsStage<D>{s});
+        walking(PairStage<D, V>{md, g, s, view});
       }
-      walking(ForceStage<V>{md, g, u_, s, view, grid_.spec()});
+      walking(ForceStage<D, V>{md, g, u_, s, view, grid_.spec()});
     };
     if constexpr (Index::kGrid) {
       contacts(grid_.view(s.pos).with_radius(2.0f * m_.radius));  // the contact reach, whatever the cell
@@ -172,13 +188,19 @@ class Pipeline {
     ex_.mark(3);
     if (integrate) {
       // 3. the reductions and the per-scene update
-      ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
+      ex_.reduce_then(s.items, n, &g->pending, SumsOp<D>{}, StepSums::identity(), FinalizeStage<D>{md, g, u_});
       ex_.mark(4);
       // 4. integrate in place (the sorted buffers become the current ones)
-      ex_.for_each(n, IntegrateStage{md, g, u_, s});
+      ex_.for_each(n, IntegrateStage<D>{md, g, u_, s});
+      // the cold beam's leaving particles onto the inflow conveyor's free slots
+      if (m_.conv_rows > 0)
+        for (int attempt = 0; attempt < kConveyorAttempts; ++attempt) {
+          if (attempt > 0) ex_.for_each(kConveyorThreads, ConveyorClaimStage<D>{md, g, s, attempt});
+          ex_.for_each(kConveyorThreads, ConveyorPlaceStage<D>{md, g, u_, s, attempt});
+        }
       ex_.mark(5);
     } else {
-      ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
+      ex_.reduce(s.items, n, &g->sums, SumsOp<D>{}, StepSums::identity());
       ex_.mark(4);
     }
   }
@@ -190,37 +212,44 @@ class Pipeline {
   if (name == #fname) return {static_cast<void*>(storage), (long long)(count)};
     CPS_WT_FIELDS(CPS_FIELD_VIEW)
 #undef CPS_FIELD_VIEW
-    throw Error("wind-tunnel: no field '" + name + "'");
+    throw Error(std::string(kind) + ": no field '" + name + "'");
   }
 
   // positions (ids restart at 0..n-1), velocities, or a checkpoint's ids
   void upload(const std::string& name, const void* src, long long count) {
     const int n = m_.n;
-    if (count != n) throw Error("wind-tunnel: " + name + " needs " + std::to_string(n) + " items");
+    if (count != n) throw Error(std::string(kind) + ": " + name + " needs " + std::to_string(n) + " items");
     const int cur = parity_;
     if (name == "position") {
-      ex_.to_device(pos_[cur].data(), src, n * sizeof(Vec2));
+      ex_.to_device(pos_[cur].data(), src, n * sizeof(Vec<D>));
       std::vector<int> ids(n);
       for (int i = 0; i < n; ++i) ids[i] = i;
       ex_.to_device(id_[cur].data(), ids.data(), n * sizeof(int));
       std::vector<int> zero(n, 0);
       ex_.to_device(scat_[cur].data(), zero.data(), n * sizeof(int));
     } else if (name == "velocity") {
-      ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec2));
+      ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec<D>));
     } else if (name == "id") {
       ex_.to_device(id_[cur].data(), src, n * sizeof(int));
     } else if (name == "scattered") {
       ex_.to_device(scat_[cur].data(), src, n * sizeof(int));
     } else {
-      throw Error("wind-tunnel: field '" + name + "' cannot be set");
+      throw Error(std::string(kind) + ": field '" + name + "' cannot be set");
     }
   }
 
+  // lift and drag per unit span (D = 3: the whole span's over the span; D = 2: as summed)
   std::vector<std::pair<std::string, double>> derived(const Scene& r) const {
     const float me = effective_mass(m_.mass, m_.mass), mw = effective_mass(m_.mass, 0.0f);
+    double lift = double(r.sums.force[1]), drag = double(r.sums.force[0]);
+    if constexpr (D == 3) {
+      const double span = double(m_.hi[2]) - double(m_.lo[2]);
+      lift /= span;
+      drag /= span;
+    }
     return {{"vmax", std::sqrt(double(r.sums.vmax2))},
-            {"lift", double(r.sums.force[1])},
-            {"drag", double(r.sums.force[0])},
+            {"lift", lift},
+            {"drag", drag},
             {"chosen_dt", double(choose_dt(m_, r.sums.vmax2))},
             {"restitution_pp", double(restitution_from_damping(m_.pp, me))},
             {"restitution_wall", double(restitution_from_damping(m_.wall, mw))},
@@ -245,6 +274,7 @@ class Pipeline {
     a.pressure = pressure_.data();
     a.contacts = contacts_.data();
     a.items = items_.data();
+    a.leaving = leaving_.data();
     return a;
   }
 
@@ -257,14 +287,15 @@ class Pipeline {
   Buf<Model> model_;
   Buf<int> foil_start_, foil_refs_;  // the airfoil's edge grid (polygon_grid.h)
   Buf<unsigned char> foil_flag_;
-  Buf<Vec2> pos_[2], vel_[2];
+  Buf<Vec<D>> pos_[2], vel_[2];
   Buf<int> id_[2];
   Buf<int> scat_[2];
   Buf<float> ndens_;
-  Buf<Vec2> force_;
+  Buf<Vec<D>> force_;
   Buf<float> pressure_;
   Buf<int> contacts_;
   Buf<StepSums> items_;
+  Buf<int> leaving_;  // this step's leaving particles (the inflow conveyor)
   int parity_ = 0;
 };
 

@@ -1,5 +1,7 @@
 // The wind tunnel's stages: functors over the particles (lanes of width 1: for_each) or one
-// item per scene. Nothing here knows which backend runs it.
+// item per scene. Nothing here knows which backend runs it. Every stage is a template on the
+// dimension D (model.h): the x-y plane holds the channel's walls and the airfoil section; D = 3
+// adds the periodic span z (contacts across it through periodic images, span_image).
 #pragma once
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/scenes/wind_tunnel/model.h"
@@ -74,18 +76,101 @@ CPS_HD CPS_INLINE float flux_weighted_speed_ratio(float s, unsigned seed, int id
 }
 
 // the fastest particle moves at most dt_fraction radii per step, and dt <= dt_max
-CPS_HD CPS_INLINE float choose_dt(const Model& m, float vmax2) {
+template <int D>
+CPS_HD CPS_INLINE float choose_dt(const Model<D>& m, float vmax2) {
   float v = fsqrt(vmax2);
   float dt = m.dt_max;
   if (v > 0.0f) dt = fmin2(dt, m.dt_fraction * m.radius / v);
   return dt;
 }
 
+// the x-y components of a vector (the plane of the airfoil section), and a vector with its
+// x-y components replaced (z kept); for D = 2 both are the vector itself
+template <int D>
+CPS_HD CPS_INLINE Vec2 xy(const Vec<D>& a) {
+  if constexpr (D == 2) return a;
+  else return Vec2{{a[0], a[1]}};
+}
+template <int D>
+CPS_HD CPS_INLINE void set_xy(Vec<D>& a, const Vec2& b) {
+  if constexpr (D == 2) a = b;
+  else {
+    a[0] = b[0];
+    a[1] = b[1];
+  }
+}
+// the x-y vector b as a D-vector (z = 0)
+template <int D>
+CPS_HD CPS_INLINE Vec<D> from_xy(const Vec2& b) {
+  if constexpr (D == 2) return b;
+  else return Vec<D>{{b[0], b[1], 0.0f}};
+}
+
+// D = 3, the periodic span: the shift (+L or -L, L the span; 0: none) that takes z to its
+// image beyond the other end of the span when z lies within `reach` of this end; the pairs a
+// particle has with particles near the other end are found by a second search of the index
+// around x + shift e_z (a span of at least two reaches, which build.h asks for, has at most one
+// such image and never the particle itself or a particle found directly)
+template <int D>
+CPS_HD CPS_INLINE float span_image(const Model<D>& m, float z, float reach) {
+  if constexpr (D == 2) {
+    return 0.0f;
+  } else {
+    const float L = m.hi[2] - m.lo[2];
+    return z - m.lo[2] < reach ? L : (m.hi[2] - z < reach ? -L : 0.0f);
+  }
+}
+// the displacement x_j - (x_i + shift e_z), as (x_j - x_i) - shift in z: the two particles of a
+// pair meeting through the periodic boundary see exactly opposite displacements
+template <int D>
+CPS_HD CPS_INLINE Vec<D> image_displacement(const Vec<D>& xi, const Vec<D>& xj, float shift) {
+  Vec<D> d = xj - xi;
+  if constexpr (D == 3) d[2] = d[2] - shift;
+  return d;
+}
+// the index view searched around an image point: its reach widened by a rounding margin (the
+// pair law decides on the exact displacement, image_displacement, so the search must not miss
+// a pair that the law sees touching)
+template <int D>
+CPS_HD CPS_INLINE CellGridView<D> widened(const CellGridView<D>& v, float reach) {
+  return v.with_radius(reach);
+}
+template <int D>
+CPS_HD CPS_INLINE AllPairsView<D> widened(const AllPairsView<D>& v, float reach) {
+  return v.with_radius(reach);
+}
+template <int D>
+CPS_HD CPS_INLINE LbvhView<D> widened(const LbvhView<D>& v, float reach) {
+  LbvhView<D> w = v;
+  w.radius = reach > v.radius ? reach : v.radius;
+  return w;
+}
+// the search reach around an image point: a contact diameter and a rounding margin
+template <int D>
+CPS_HD CPS_INLINE float image_reach(const Model<D>& m) { return 2.0f * m.radius * (1.0f + 1e-5f); }
+
+// D = 3: z taken back into the span [lo, hi) (a particle may cross it more than once a step
+// when the span is a few radii)
+template <int D>
+CPS_HD CPS_INLINE void wrap_span(const Model<D>& m, Vec<D>& x) {
+  if constexpr (D == 3) {
+    const float L = m.hi[2] - m.lo[2];
+    const float t = (x[2] - m.lo[2]) / L;
+    if (t < 0.0f || t >= 1.0f) {
+      x[2] -= L * ffloor(t);
+      if (!(x[2] < m.hi[2]) || !(x[2] >= m.lo[2])) x[2] = m.lo[2];  // rounding at the ends
+    }
+  }
+  (void)m;
+  (void)x;
+}
+
 // stage 1: the current arrays gathered into cell order (order: sorted slot -> input slot;
 // null: a plain copy, for a collisionless gas that needs no index)
+template <int D>
 struct ReorderStage {
   const int* order;
-  Arrays a;
+  Arrays<D> a;
   CPS_HD void operator()(int j) const {
     int o = order ? order[j] : j;
     a.pos_alt[j] = a.pos[o];
@@ -113,7 +198,8 @@ struct AirfoilFrame {
   CPS_HD CPS_INLINE Vec2 to_body(const Vec2& x) const { return pitched ? q + dir_to_body(x - q) : x; }
   CPS_HD CPS_INLINE Vec2 to_world(const Vec2& x) const { return pitched ? q + dir_to_world(x - q) : x; }
 };
-CPS_HD CPS_INLINE AirfoilFrame airfoil_frame(const Model& m, const Control& u) {
+template <int D>
+CPS_HD CPS_INLINE AirfoilFrame airfoil_frame(const Model<D>& m, const Control& u) {
   AirfoilFrame f;
   f.pitched = u.pitch != 0.0f;
   const float a = u.pitch * (kPi / 180.0f);
@@ -124,37 +210,41 @@ CPS_HD CPS_INLINE AirfoilFrame airfoil_frame(const Model& m, const Control& u) {
 }
 
 // the contact force on particle i from the two walls and the airfoil; adds the reaction on
-// the airfoil (force, moment about the quarter chord) to s
-CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const AirfoilFrame& af, const Vec2& x, const Vec2& v,
-                                       float& pressure, int& contacts, StepSums& s, int& scattered) {
-  Vec2 F = Vec2::zero();
-  Vec2 f;
+// the airfoil (force, moment about the quarter chord) to s. D = 3: the airfoil is the section
+// extruded along z, its contact the 2-D one of the particle's x-y components (its normal has
+// no z component, so the particle's z velocity does not enter)
+template <int D>
+CPS_HD CPS_INLINE Vec<D> boundary_forces(const Model<D>& m, const AirfoilFrame& af, const Vec<D>& x, const Vec<D>& v,
+                                         float& pressure, int& contacts, StepSums<D>& s, int& scattered) {
+  Vec<D> F = Vec<D>::zero();
+  Vec<D> f;
   float mag;
-  const Vec2 up{{0.0f, 1.0f}}, down{{0.0f, -1.0f}};
-  if (wall_contact_force<2>(m.wall, x[1] - m.lo[1], up, v, m.radius, Vec2::zero(), f, mag)) {
+  const Vec<D> up = from_xy<D>(Vec2{{0.0f, 1.0f}}), down = from_xy<D>(Vec2{{0.0f, -1.0f}});
+  if (wall_contact_force<D>(m.wall, x[1] - m.lo[1], up, v, m.radius, Vec<D>::zero(), f, mag)) {
     F += f;
     s.wall_force += f;
     pressure += mag;
     contacts += 1;
   }
-  if (wall_contact_force<2>(m.wall, m.hi[1] - x[1], down, v, m.radius, Vec2::zero(), f, mag)) {
+  if (wall_contact_force<D>(m.wall, m.hi[1] - x[1], down, v, m.radius, Vec<D>::zero(), f, mag)) {
     F += f;
     s.wall_force += f;
     pressure += mag;
     contacts += 1;
   }
-  const Vec2 xb = af.to_body(x);
+  const Vec2 xb = af.to_body(xy(x));
   if (m.n_edges > 0 && box_distance2(m.bbox, xb) < m.radius * m.radius) {
     PolygonHit hit;
-    if (polygon_contact_force(m.wing, m.airfoil_grid(), xb, af.dir_to_body(v), m.radius, f, mag, hit)) {
-      f = af.dir_to_world(f);
-      F += f;
+    Vec2 f2;
+    if (polygon_contact_force(m.wing, m.airfoil_grid(), xb, af.dir_to_body(xy(v)), m.radius, f2, mag, hit)) {
+      f2 = af.dir_to_world(f2);
+      F += from_xy<D>(f2);
       pressure += mag;
       contacts += 1;
       // the airfoil gets -f, applied at the contact point
-      Vec2 fa = -f;
+      Vec2 fa = -f2;
       Vec2 r = af.to_world(hit.closest) - m.quarter_chord;
-      s.force += fa;
+      s.force += from_xy<D>(fa);
       s.moment += r[0] * fa[1] - r[1] * fa[0];
       s.contacts += 1;
       scattered = 1;
@@ -163,39 +253,62 @@ CPS_HD CPS_INLINE Vec2 boundary_forces(const Model& m, const AirfoilFrame& af, c
   return F;
 }
 
-// the number density around x: the particles in the 3 x 3 cells of `spec` around x's cell,
-// itself excluded, over the block's area (cells inside the grid); from the cell ranges on
-// the grid, by testing every particle's cell with the all-pairs index (the same count)
-CPS_HD CPS_INLINE float block_density(const CellGridView<D>& grid, const CellGridSpec<D>&, const Vec2& x) {
+// the number density around x: the particles in the 3^D cells of `spec` around x's cell,
+// itself excluded, over the block's area (D = 3: volume; cells inside the grid: at the ends
+// of the periodic span the block is cut there, an unbiased estimate all the same); from the
+// cell ranges on the grid, by testing every particle's cell with the all-pairs index (the
+// same count)
+template <int D>
+CPS_HD CPS_INLINE float block_measure(const CellGridSpec<D>& spec, int cells) {
+  float a = float(cells) * spec.cell * spec.cell;
+  if constexpr (D == 3) a *= spec.cell;
+  return a;
+}
+// is cell cj one of the 3^D around c?
+template <int D>
+CPS_HD CPS_INLINE bool in_block(const int* c, const int* cj) {
+  bool in = true;
+  for (int k = 0; k < D; ++k) in = in && cj[k] - c[k] >= -1 && cj[k] - c[k] <= 1;
+  return in;
+}
+// how many of the 3^D cells around c lie inside the grid
+template <int D>
+CPS_HD CPS_INLINE int block_cells(const CellGridSpec<D>& spec, const int* c) {
+  int cells = 1;
+  for (int k = 0; k < D; ++k) {
+    int along = 0;
+    for (int q = c[k] - 1; q <= c[k] + 1; ++q) along += (q >= 0 && q < spec.dims[k]) ? 1 : 0;
+    cells *= along;
+  }
+  return cells;
+}
+template <int D>
+CPS_HD CPS_INLINE float block_density(const CellGridView<D>& grid, const CellGridSpec<D>&, const Vec<D>& x) {
   int count, cells;
   grid.block_count(x, count, cells);
-  return float(count - 1) / (float(cells) * grid.spec.cell * grid.spec.cell);
+  return float(count - 1) / block_measure(grid.spec, cells);
 }
-CPS_HD CPS_INLINE float block_density(const AllPairsView<D>& all, const CellGridSpec<D>& spec, const Vec2& x) {
+template <int D>
+CPS_HD CPS_INLINE float block_density(const AllPairsView<D>& all, const CellGridSpec<D>& spec, const Vec<D>& x) {
   int c[D], cj[D];
   spec.cell_of(x, c);
   int count = 0;
   for (int j = 0; j < all.n; ++j) {
     spec.cell_of(all.pos[j], cj);
-    const int dx = cj[0] - c[0], dy = cj[1] - c[1];
-    count += (dx >= -1 && dx <= 1 && dy >= -1 && dy <= 1) ? 1 : 0;
+    count += in_block<D>(c, cj) ? 1 : 0;
   }
-  int cells = 0;
-  for (int y = c[1] - 1; y <= c[1] + 1; ++y)
-    for (int xx = c[0] - 1; xx <= c[0] + 1; ++xx)
-      cells += (xx >= 0 && xx < spec.dims[0] && y >= 0 && y < spec.dims[1]) ? 1 : 0;
-  return float(count - 1) / (float(cells) * spec.cell * spec.cell);
+  return float(count - 1) / block_measure(spec, block_cells(spec, c));
 }
 
-// the tree: one box query of the 3 x 3 cells (a little wider), each slot found counted when its
+// the tree: one box query of the 3^D cells (a little wider), each slot found counted when its
 // cell is in the block. With a visitor (the contact gather), the same walk also visits every
 // slot of the contact reach: the query box is the union of the block's and the reach's (the
 // block holds the reach unless x lies outside the grid), a slot is a contact candidate when
 // it lies in the reach's box (as in gather), and the walk meets those slots in the order
 // gather would (the tree's order does not depend on the box): one walk instead of two, the
 // same contacts summed in the same order
-template <class Visit>
-CPS_HD CPS_INLINE float tree_block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, int i, const Vec2& x,
+template <int D, class Visit>
+CPS_HD CPS_INLINE float tree_block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec<D>& x,
                                            Visit* contact) {
   int c[D], cj[D];
   spec.cell_of(x, c);
@@ -213,82 +326,79 @@ CPS_HD CPS_INLINE float tree_block_density(const LbvhView<D>& tree, const CellGr
   const float r2 = tree.radius * tree.radius;
   int count = 0;
   tree.query_box(qlo, qhi, [&](int j) {
-    const Vec2 pj = tree.pos[j];
+    const Vec<D> pj = tree.pos[j];
     if (contact) {
       bool in = true;
       for (int k = 0; k < D; ++k) in = in && pj[k] >= rlo[k] && pj[k] <= rhi[k];
       if (in) {
-        const Vec2 d = x - pj;
+        const Vec<D> d = x - pj;
         const float rr = norm2(d);
         if (rr < r2) (*contact)(j, d, rr);
       }
     }
     spec.cell_of(pj, cj);
-    const int dx = cj[0] - c[0], dy = cj[1] - c[1];
-    count += (dx >= -1 && dx <= 1 && dy >= -1 && dy <= 1) ? 1 : 0;
+    count += in_block<D>(c, cj) ? 1 : 0;
   });
-  (void)i;
-  int cells = 0;
-  for (int y = c[1] - 1; y <= c[1] + 1; ++y)
-    for (int xx = c[0] - 1; xx <= c[0] + 1; ++xx)
-      cells += (xx >= 0 && xx < spec.dims[0] && y >= 0 && y < spec.dims[1]) ? 1 : 0;
-  return float(count - 1) / (float(cells) * spec.cell * spec.cell);
+  return float(count - 1) / block_measure(spec, block_cells(spec, c));
 }
+template <int D>
 struct NoContactVisit {
-  CPS_HD void operator()(int, const Vec2&, float) const {}
+  CPS_HD void operator()(int, const Vec<D>&, float) const {}
 };
-CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec2& x) {
-  return tree_block_density(tree, spec, -1, x, static_cast<NoContactVisit*>(nullptr));
+template <int D>
+CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec<D>& x) {
+  return tree_block_density(tree, spec, x, static_cast<NoContactVisit<D>*>(nullptr));
 }
 
 // the contacts by gather (visit(j, x - x_j, r2) for every slot of the contact reach, i
 // included) and the number density around x: the index's gather, then its block count; the
 // tree does both in one walk (tree_block_density)
-template <class View, class Visit>
-CPS_HD CPS_INLINE float gather_and_density(const View& view, const CellGridSpec<D>& spec, int i, const Vec2& x,
+template <int D, class View, class Visit>
+CPS_HD CPS_INLINE float gather_and_density(const View& view, const CellGridSpec<D>& spec, int i, const Vec<D>& x,
                                            Visit& visit) {
   view.gather(i, x, visit);
   return block_density(view, spec, x);
 }
-template <class Visit>
-CPS_HD CPS_INLINE float gather_and_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, int i, const Vec2& x,
+template <int D, class Visit>
+CPS_HD CPS_INLINE float gather_and_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, int, const Vec<D>& x,
                                            Visit& visit) {
-  return tree_block_density(tree, spec, i, x, &visit);
+  return tree_block_density(tree, spec, x, &visit);
 }
 
 // the reflexive form, stage 2a: the per-particle contact sums zeroed
+template <int D>
 struct ZeroContactsStage {
-  Arrays s;
+  Arrays<D> s;
   CPS_HD void operator()(int i) const {
-    s.force[i] = Vec2::zero();
+    s.force[i] = Vec<D>::zero();
     s.pressure[i] = 0.0f;
     s.contacts[i] = 0;
   }
 };
 
-// the reaction (fx, fy), its magnitude and one contact added to particle j. Warp-aggregated
+// the reaction f, its magnitude and one contact added to particle j. Warp-aggregated
 // (the seed's option, on the device): the lanes of a warp adding to the same j at this moment
 // (__match_any_sync over j) sum their values by shuffles and one of them adds the sum, so a
 // particle hit by several lanes takes one atomic per component instead of one per lane. On the
 // CPU, and with aggregate off, one atomic each.
-CPS_HD CPS_INLINE void add_reaction(const Arrays& s, int j, float fx, float fy, float mag, bool aggregate) {
+template <int D>
+CPS_HD CPS_INLINE void add_reaction(const Arrays<D>& s, int j, const Vec<D>& f, float mag, bool aggregate) {
 #ifdef __CUDA_ARCH__
   if (aggregate) {
     const unsigned active = __activemask();
     const unsigned peers = __match_any_sync(active, j);
     const int lane = int(threadIdx.x & 31u);
-    float sx = 0.0f, sy = 0.0f, sm = 0.0f;
+    float sf[D], sm = 0.0f;
+    for (int k = 0; k < D; ++k) sf[k] = 0.0f;
     unsigned rest = peers;
     while (rest) {  // every peer runs the same loop: the shuffles see the whole group
       const int src = __ffs(int(rest)) - 1;
       rest &= rest - 1u;
-      sx += __shfl_sync(peers, fx, src);
-      sy += __shfl_sync(peers, fy, src);
+      for (int k = 0; k < D; ++k) sf[k] += __shfl_sync(peers, f[k], src);
       sm += __shfl_sync(peers, mag, src);
     }
     if (lane == __ffs(int(peers)) - 1) {
-      atomicAdd(&s.force[j][0], sx);
-      atomicAdd(&s.force[j][1], sy);
+      for (int k = 0; k < D; ++k) atomicAdd(&s.force[j][k], sf[k]);
       atomicAdd(&s.pressure[j], sm);
       atomicAdd(&s.contacts[j], __popc(peers));
     }
@@ -296,8 +406,7 @@ CPS_HD CPS_INLINE void add_reaction(const Arrays& s, int j, float fx, float fy, 
   }
 #endif
   (void)aggregate;
-  atomic_add(&s.force[j][0], fx);
-  atomic_add(&s.force[j][1], fy);
+  for (int k = 0; k < D; ++k) atomic_add(&s.force[j][k], f[k]);
   atomic_add(&s.pressure[j], mag);
   atomic_add(&s.contacts[j], 1);
 }
@@ -305,33 +414,43 @@ CPS_HD CPS_INLINE void add_reaction(const Arrays& s, int j, float fx, float fy, 
 // stage 2b: each overlapping pair once, from its lower slot (view.pairs); the force on i is
 // summed locally, the reaction on j and i's sum added with atomics (float atomics: the sums'
 // order, and so their last bits, vary from run to run on parallel backends)
-template <class View>
+// (D = 3: and the pairs through the periodic span, from the lower slot as well)
+template <int D, class View>
 struct PairStage {
-  const Model* model;
-  const Scene* g;
-  Arrays s;
+  const Model<D>* model;
+  const Scene<D>* g;
+  Arrays<D> s;
   View view;
   CPS_HD void operator()(int i) const {
     if (halted(g)) return;
-    const Model& m = *model;
-    const Vec2 x = s.pos[i], v = s.vel[i];
+    const Model<D>& m = *model;
+    const Vec<D> x = s.pos[i], v = s.vel[i];
     const float r = m.radius;
-    Vec2 F = Vec2::zero();
+    Vec<D> F = Vec<D>::zero();
     float pressure = 0.0f;
     int contacts = 0;
-    view.pairs(i, x, [&](int j, const Vec2&, float) {
-      Vec2 f;
+    // the pair (i, j), j's displacement seen from i's image x + shift e_z (shift 0: x itself)
+    auto touch = [&](int j, float shift) {
+      Vec<D> f;
       float mag;
-      if (pair_contact_force<2>(m.pp, x, v, r, s.pos[j], s.vel[j], r, f, mag)) {
+      if (pair_contact_force_d<D>(m.pp, image_displacement(x, s.pos[j], shift), v, r, s.vel[j], r, f, mag)) {
         F += f;
         pressure += mag;
         contacts += 1;
-        add_reaction(s, j, -f[0], -f[1], mag, m.reflexive == 2);
+        add_reaction(s, j, -f, mag, m.reflexive == 2);
       }
-    });
+    };
+    view.pairs(i, x, [&](int j, const Vec<D>&, float) { touch(j, 0.0f); });
+    if constexpr (D == 3) {
+      const float shift = span_image(m, x[2], image_reach(m));
+      if (shift != 0.0f) {
+        Vec<D> xq = x;
+        xq[2] += shift;
+        widened(view, image_reach(m)).pairs(i, xq, [&](int j, const Vec<D>&, float) { touch(j, shift); });
+      }
+    }
     if (contacts > 0) {
-      atomic_add(&s.force[i][0], F[0]);
-      atomic_add(&s.force[i][1], F[1]);
+      for (int k = 0; k < D; ++k) atomic_add(&s.force[i][k], F[k]);
       atomic_add(&s.pressure[i], pressure);
       atomic_add(&s.contacts[i], contacts);
     }
@@ -341,31 +460,32 @@ struct PairStage {
 // stage 2: contact forces by gather over the index (the cell grid, or every particle for
 // the all-pairs reference; each particle sums its own: no atomics, the same sum in the same
 // order on every backend), walls, airfoil; the per-particle items of the step's reductions
-template <class View>
+// (D = 3: and the contacts through the periodic span)
+template <int D, class View>
 struct ForceStage {
-  const Model* model;
-  const Scene* g;
+  const Model<D>* model;
+  const Scene<D>* g;
   const Control* ctl;
-  Arrays s;
+  Arrays<D> s;
   View grid;
   CellGridSpec<D> spec;  // the cells the number density counts in
   CPS_HD void operator()(int i) const {
     if (halted(g)) return;  // the reduction of a step not taken is discarded
-    const Model& m = *model;
-    const Vec2 x = s.pos[i], v = s.vel[i];
-    Vec2 F = Vec2::zero();
+    const Model<D>& m = *model;
+    const Vec<D> x = s.pos[i], v = s.vel[i];
+    Vec<D> F = Vec<D>::zero();
     float pressure = 0.0f;
     int contacts = 0;
-    const Vec2* pos = s.pos;
-    const Vec2* vel = s.vel;
+    const Vec<D>* pos = s.pos;
+    const Vec<D>* vel = s.vel;
     const float r = m.radius;
     const SpringDashpot law = m.pp;
     float density = 0.0f;
-    auto pair = [&](int j, const Vec2&, float) {
-      if (j == i) return;
-      Vec2 f;
+    // the pair (i, j), j's displacement seen from i's image x + shift e_z (shift 0: x itself)
+    auto touch = [&](int j, float shift) {
+      Vec<D> f;
       float mag;
-      if (pair_contact_force<2>(law, x, v, r, pos[j], vel[j], r, f, mag)) {
+      if (pair_contact_force_d<D>(law, image_displacement(x, pos[j], shift), v, r, vel[j], r, f, mag)) {
         F += f;
         pressure += mag;
         contacts += 1;
@@ -378,9 +498,22 @@ struct ForceStage {
       contacts = s.contacts[i];
       density = block_density(grid, spec, x);
     } else if (m.collide) {
+      // the gather and the number density (one walk of the tree for both)
+      auto pair = [&](int j, const Vec<D>&, float) {
+        if (j == i) return;
+        touch(j, 0.0f);
+      };
       density = gather_and_density(grid, spec, i, x, pair);
+      if constexpr (D == 3) {
+        const float shift = span_image(m, x[2], image_reach(m));
+        if (shift != 0.0f) {
+          Vec<D> xq = x;
+          xq[2] += shift;
+          widened(grid, image_reach(m)).gather(i, xq, [&](int j, const Vec<D>&, float) { touch(j, shift); });
+        }
+      }
     }
-    StepSums it = StepSums::identity();
+    StepSums<D> it = StepSums<D>::identity();
     int scattered = s.scattered[i];
     F += boundary_forces(m, airfoil_frame(m, *ctl), x, v, pressure, contacts, it, scattered);
     s.scattered[i] = scattered;
@@ -398,7 +531,8 @@ struct ForceStage {
 // the block averages: add this step's airfoil force over dt; a full block is closed, and
 // when all kMaxBlocks are full adjacent pairs are merged and the block length doubles
 // (batch means with a growing batch: the standard error stays honest for correlated series)
-CPS_HD CPS_INLINE void accumulate_blocks(Scene& G, const StepSums& S, double dt) {
+template <int D>
+CPS_HD CPS_INLINE void accumulate_blocks(Scene<D>& G, const StepSums<D>& S, double dt) {
   G.cur_t += dt;
   G.cur_lift += double(S.force[1]) * dt;
   G.cur_drag += double(S.force[0]) * dt;
@@ -422,13 +556,16 @@ CPS_HD CPS_INLINE void accumulate_blocks(Scene& G, const StepSums& S, double dt)
 }
 
 // stage 3 (one item per scene): dt, the block averages, the clock
+template <int D>
 struct FinalizeStage {
-  const Model* model;
-  Scene* g;
+  const Model<D>* model;
+  Scene<D>* g;
+  const Control* ctl;
   CPS_HD void operator()(int) const {
-    const Model& m = *model;
-    Scene& G = *g;
+    const Model<D>& m = *model;
+    Scene<D>& G = *g;
     Clock& C = G.clock;
+    G.n_leaving = 0;  // this step's list (filled by the integration)
     if (clock_at_end(C)) {
       G.step_dt = 0.0f;
       return;
@@ -438,7 +575,7 @@ struct FinalizeStage {
       G.step_dt = 0.0f;
       return;
     }
-    const StepSums& S = G.pending;
+    const StepSums<D>& S = G.pending;
     if (!finite(S.vmax2) || !finite(S.force[0] + S.force[1] + S.moment)) {
       C.bad = kBadParticles;
       C.bad_step = C.step + 1;
@@ -451,6 +588,7 @@ struct FinalizeStage {
     // the forces of this step's state act over [time, time + dt]
     if (C.time >= m.measure_start) accumulate_blocks(G, S, double(dt));
     G.step_dt = dt;
+    G.inflow_x += double(m.speed) * double(1.0f + ctl->speed_scale) * double(dt);  // the conveyor's slots move in
     advance_clock(C, dt, last);
   }
 };
@@ -463,30 +601,163 @@ struct FinalizeStage {
 // component flux-weighted (flux_weighted_speed_ratio) at the speed ratio U / c_m, the cross
 // component Gaussian of the thermal spread m.thermal U (1 + speed_scale) ... kept at
 // m.thermal U (the temperature does not follow the speed control); cold beam (thermal 0):
-// exactly (U, 0). x is the distance it moved in since it entered.
-CPS_HD CPS_INLINE void reenter(const Model& m, const Control& u, int id, long long step, float dt, float frac, Vec2& x,
-                               Vec2& v) {
+// exactly (U, 0). x is the distance it moved in since it entered. D = 3: z uniform across the
+// periodic span, and the two cross components (y, z) the two Gaussians of one Box-Muller pair
+// (so the gas inside is the 3-D drifting Maxwellian; cold beam: (U, 0, 0)).
+template <int D>
+CPS_HD CPS_INLINE void reenter(const Model<D>& m, const Control& u, int id, long long step, float dt, float frac,
+                               Vec<D>& x, Vec<D>& v) {
   const float U = m.speed * (1.0f + u.speed_scale);
   const float u1 = uniform01(m.seed, id, step, 1);
   const float u2 = uniform01(m.seed, id, step, 2), u3 = uniform01(m.seed, id, step, 3);
   const float span = m.hi[1] - m.lo[1] - 2.0f * m.radius;
   const float sigma = m.thermal * m.speed;  // per component: sqrt(kT / m)
-  float ux = U, uy = 0.0f;
+  float ux = U, uy = 0.0f, uz = 0.0f;
   if (sigma > 0.0f) {
     const float cm = 1.41421356f * sigma;  // sqrt(2 kT / m)
     ux = cm * flux_weighted_speed_ratio(U / cm, m.seed, id, step, 4);
     uy = sigma * fsqrt(-2.0f * flog(u2)) * fcos(2.0f * kPi * u3);
+    if constexpr (D == 3) uz = sigma * fsqrt(-2.0f * flog(u2)) * fsin(2.0f * kPi * u3);
   }
   const float in = fclamp(ux * frac * dt, 0.0f, m.hi[0] - m.lo[0]);
-  x = Vec2{{m.lo[0] + in, m.lo[1] + m.radius + u1 * span}};
-  v = Vec2{{ux, uy}};
+  if constexpr (D == 2) {
+    (void)uz;
+    x = Vec2{{m.lo[0] + in, m.lo[1] + m.radius + u1 * span}};
+    v = Vec2{{ux, uy}};
+  } else {
+    // stream 200: beyond those of flux_weighted_speed_ratio (4 ... 102)
+    const float u4 = uniform01(m.seed, id, step, 200);
+    x = Vec<D>{{m.lo[0] + in, m.lo[1] + m.radius + u1 * span, m.lo[2] + u4 * (m.hi[2] - m.lo[2])}};
+    wrap_span(m, x);  // u4 < 1, but lo + u4 L may round up to hi
+    v = Vec<D>{{ux, uy, uz}};
+  }
 }
+
+// The inflow conveyor (a cold beam with contacts, m.conv_rows > 0). A particle re-entering at
+// a uniformly random height lands on another one about 4 times the solid fraction of the time
+// (40% at the default 0.1): the overlap's spring energy heats the stream, which then is no
+// longer the cold free stream the initial lattice is. So the free stream enters as the start
+// does, as a lattice: slots in conv_rows rows (dy apart) and columns dx apart moving in at the
+// stream's speed. Slot (r, c) lies at x = lo + inflow_x + phase_r - c dx (plus a fixed jitter,
+// the start lattice's), so the column in the inlet's first dx is
+// c_now = floor((inflow_x + phase_r) / dx), and a row is free while its next column
+// conv_next[r] <= c_now (D = 3: a row is a height in one layer of the span). The slots exceed the flux by the start's 10% vacancies, so a free row
+// is found among a few hashed tries. Two particles may pick one row in a step: the smallest id
+// gets it (atomic min, then a second pass), whatever the threads' order, so every backend
+// places the same particles in the same slots; a particle that finds no free row in
+// kConveyorAttempts rounds of kConveyorTries keeps the random-height entry it was given.
+constexpr int kConveyorTries = 64;
+constexpr int kConveyorAttempts = 2;
+constexpr int kConveyorThreads = 1024;  // the claim and place passes loop over the leaving list
+constexpr int kNoClaim = 0x7fffffff;
+
+// the row's phase: a golden-ratio sequence, so neighbouring rows' columns do not line up
+template <int D>
+CPS_HD CPS_INLINE double conveyor_phase(const Model<D>& m, int r) {
+  const double g = double(r) * 0.6180339887498949;
+  return double(m.conv_dx) * (g - floor(g));
+}
+template <int D>
+CPS_HD CPS_INLINE long long conveyor_column(const Model<D>& m, double inflow_x, int r) {
+  return (long long)floor((inflow_x + conveyor_phase(m, r)) / double(m.conv_dx));
+}
+// the first of the particle's hashed rows whose inlet slot is free, and that slot; -1: none
+template <int D>
+CPS_HD CPS_INLINE int conveyor_row(const Model<D>& m, const Scene<D>& G, int id, long long step, int attempt,
+                                   long long& column) {
+  for (int j = 0; j < kConveyorTries; ++j) {
+    int r = int(uniform01(m.seed, id, step, 1000 + attempt * kConveyorTries + j) * float(m.conv_rows));
+    r = r < m.conv_rows ? r : m.conv_rows - 1;
+    const long long c = conveyor_column(m, G.inflow_x, r);
+    if (G.conv_next[r] <= c && c < 0x7ffffffe) {  // (2^31 columns: billions of steps)
+      column = c;
+      return r;
+    }
+  }
+  return -1;
+}
+// the position of slot (r, c): the start lattice's jitter, 0.45 of the gap each way, keeps
+// neighbouring slots more than a diameter apart; never upstream of the inlet. Row r is height
+// r mod conv_ny; D = 3: in the span's layer r / conv_ny
+template <int D>
+CPS_HD CPS_INLINE Vec<D> conveyor_slot(const Model<D>& m, double inflow_x, int r, long long c) {
+  const int ry = r % m.conv_ny;
+  const float jx = (2.0f * uniform01(m.seed, r, c, 2000) - 1.0f) * 0.45f * (m.conv_dx - 2.0f * m.radius);
+  const float jy = (2.0f * uniform01(m.seed, r, c, 2001) - 1.0f) * 0.45f * (m.conv_dy - 2.0f * m.radius);
+  const double x = double(m.lo[0]) + inflow_x + conveyor_phase(m, r) - double(c) * double(m.conv_dx) + double(jx);
+  Vec<D> p;
+  p[0] = fmax2(float(x), m.lo[0]);
+  p[1] = m.conv_y0 + float(ry) * m.conv_dy + jy;
+  if constexpr (D == 3) {
+    const float jz = (2.0f * uniform01(m.seed, r, c, 2002) - 1.0f) * 0.45f * (m.conv_dz - 2.0f * m.radius);
+    p[2] = m.conv_z0 + float(r / m.conv_ny) * m.conv_dz + jz;
+    wrap_span(m, p);
+  }
+  return p;
+}
+// an attempt's claim: the particle's row, if it found a free one (the smallest id wins it)
+template <int D>
+CPS_HD CPS_INLINE void conveyor_claim(const Model<D>& m, Scene<D>* g, int id, int attempt) {
+  long long c;
+  const int r = conveyor_row(m, *g, id, g->clock.step, attempt, c);
+  if (r >= 0) atomic_min(&g->conv_claim[r], id);
+}
+// pass 1 of a later attempt: each unplaced leaving particle claims its row (the first
+// attempt's claims are made by the integration)
+template <int D>
+struct ConveyorClaimStage {
+  const Model<D>* model;
+  Scene<D>* g;
+  Arrays<D> s;
+  int attempt;
+  CPS_HD void operator()(int t) const {
+    const Model<D>& m = *model;
+    if (!(g->step_dt > 0.0f)) return;
+    const int count = g->n_leaving;
+    for (int k = t; k < count; k += kConveyorThreads) {
+      const int i = s.leaving[k];
+      if (i >= 0) conveyor_claim(m, g, s.id[i], attempt);
+    }
+  }
+};
+// pass 2: the winners take their slots (the rows they claimed are still free: only a winner
+// writes its row), reset the claim, and enter at the stream's velocity
+template <int D>
+struct ConveyorPlaceStage {
+  const Model<D>* model;
+  Scene<D>* g;
+  const Control* ctl;
+  Arrays<D> s;
+  int attempt;
+  CPS_HD void operator()(int t) const {
+    const Model<D>& m = *model;
+    if (!(g->step_dt > 0.0f)) return;
+    const int count = g->n_leaving;
+    for (int k = t; k < count; k += kConveyorThreads) {
+      const int i = s.leaving[k];
+      if (i < 0) continue;
+      const int id = s.id[i];
+      long long c;
+      const int r = conveyor_row(m, *g, id, g->clock.step, attempt, c);
+      if (r < 0 || g->conv_claim[r] != id) continue;  // no free row, or a smaller id got it
+      g->conv_claim[r] = kNoClaim;
+      g->conv_next[r] = int(c + 1);
+      s.pos[i] = conveyor_slot(m, g->inflow_x, r, c);
+      Vec<D> v = Vec<D>::zero();
+      v[0] = m.speed * (1.0f + ctl->speed_scale);
+      s.vel[i] = v;
+      s.leaving[k] = -1;
+    }
+  }
+};
 
 // no particle ends a step inside the airfoil or outside the channel: a centre that got in is
 // put back on the surface (a twentieth of a radius outside, along the signed-distance
 // normal) with its normal velocity reflected; a centre past a wall is mirrored back. These
 // are counted (pushouts): with the contact stiffness resolving the contacts, there are none
-CPS_HD CPS_INLINE bool keep_out(const Model& m, const AirfoilFrame& af, Vec2& x, Vec2& v) {
+// (D = 3: the airfoil test on the x-y components, z untouched)
+template <int D>
+CPS_HD CPS_INLINE bool keep_out(const Model<D>& m, const AirfoilFrame& af, Vec<D>& x, Vec<D>& v) {
   bool moved = false;
   if (x[1] < m.lo[1]) {
     x[1] = fmin2(2.0f * m.lo[1] - x[1], m.hi[1]);
@@ -499,7 +770,7 @@ CPS_HD CPS_INLINE bool keep_out(const Model& m, const AirfoilFrame& af, Vec2& x,
     moved = true;
   }
   // (in the airfoil's built frame: af)
-  Vec2 xb = af.to_body(x);
+  Vec2 xb = af.to_body(xy(x));
   if (m.n_edges > 0 && box_distance2(m.bbox, xb) == 0.0f && polygon_contains(m.airfoil_grid(), xb)) {
     PolygonHit hit = polygon_sdf(m.airfoil_grid(), xb);
     float step = 0.05f * m.radius;
@@ -508,10 +779,12 @@ CPS_HD CPS_INLINE bool keep_out(const Model& m, const AirfoilFrame& af, Vec2& x,
       if (!polygon_contains(m.airfoil_grid(), xb)) break;
       step *= 2.0f;
     }
-    x = af.to_world(xb);
+    set_xy(x, af.to_world(xb));
     const Vec2 normal = af.dir_to_world(hit.normal);
-    float vn = dot(v, normal);
-    if (vn < 0.0f) v -= normal * (2.0f * vn);
+    Vec2 v2 = xy(v);
+    float vn = dot(v2, normal);
+    if (vn < 0.0f) v2 -= normal * (2.0f * vn);
+    set_xy(v, v2);
     moved = true;
   }
   return moved;
@@ -519,17 +792,19 @@ CPS_HD CPS_INLINE bool keep_out(const Model& m, const AirfoilFrame& af, Vec2& x,
 
 // stage 4: integrate (forward or symplectic Euler), recycle at the outflow, keep every
 // particle in the channel and out of the airfoil
+// (D = 3: and take z back into the periodic span)
+template <int D>
 struct IntegrateStage {
-  const Model* model;
-  Scene* g;
+  const Model<D>* model;
+  Scene<D>* g;
   const Control* ctl;
-  Arrays s;
+  Arrays<D> s;
   CPS_HD void operator()(int i) const {
     const float dt = g->step_dt;
     if (!(dt > 0.0f)) return;  // a step not taken leaves the particles as they are
-    const Model& m = *model;
-    Vec2 x = s.pos[i], v = s.vel[i];
-    const Vec2 a = s.force[i] * (1.0f / m.mass);
+    const Model<D>& m = *model;
+    Vec<D> x = s.pos[i], v = s.vel[i];
+    const Vec<D> a = s.force[i] * (1.0f / m.mass);
     if (m.integrator == kSymplecticEuler) {
       v += a * dt;
       x += v * dt;
@@ -553,9 +828,20 @@ struct IntegrateStage {
       // the step counter is already the next step's: (id, step) is unique
       reenter(m, *ctl, s.id[i], g->clock.step, dt, frac, x, v);
       add_count(&g->recycled, 1);
+      // a cold beam's conveyor may move it to a lattice slot (the passes after this stage);
+      // the first attempt's claim is made here
+      if (m.conv_rows > 0) {
+        s.leaving[atomic_add(&g->n_leaving, 1)] = i;
+        conveyor_claim(m, g, s.id[i], 0);
+      }
     }
+    wrap_span(m, x);
     if (keep_out(m, airfoil_frame(m, *ctl), x, v)) add_count(&g->pushouts, 1);
-    if (!finite(x[0] + x[1] + v[0] + v[1])) raise_first(&g->clock.bad, kBadParticles);
+    if constexpr (D == 2) {
+      if (!finite(x[0] + x[1] + v[0] + v[1])) raise_first(&g->clock.bad, kBadParticles);
+    } else {
+      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&g->clock.bad, kBadParticles);
+    }
     s.scattered[i] = scattered;
     s.pos[i] = x;
     s.vel[i] = v;

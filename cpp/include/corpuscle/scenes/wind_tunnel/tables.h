@@ -4,15 +4,15 @@
 #include "corpuscle/scenes/wind_tunnel/model.h"
 
 // X(name, C type, components, group, checkpointed, settable, storage, count)
-// (cur: the current buffers, n: particles)
+// (cur: the current buffers, n: particles; D: the Pipeline's dimension)
 #define CPS_WT_FIELDS(X)                                                  \
-  X(position, float, 2, "fluid", true, true, pos_[cur].data(), n)         \
-  X(velocity, float, 2, "fluid", true, true, vel_[cur].data(), n)         \
+  X(position, float, D, "fluid", true, true, pos_[cur].data(), n)         \
+  X(velocity, float, D, "fluid", true, true, vel_[cur].data(), n)         \
   X(id, int, 1, "fluid", true, false, id_[cur].data(), n)                 \
   X(scattered, int, 1, "fluid", true, false, scat_[cur].data(), n)       \
   X(pressure, float, 1, "fluid", false, false, pressure_.data(), n)       \
   X(number_density, float, 1, "fluid", false, false, ndens_.data(), n)    \
-  X(force, float, 2, "fluid", false, false, force_.data(), n)             \
+  X(force, float, D, "fluid", false, false, force_.data(), n)             \
   X(contacts, int, 1, "fluid", false, false, contacts_.data(), n)
 
 // X(name, C type, count, member of Scene, checkpointed)
@@ -20,10 +20,10 @@
   CPS_CLOCK_SCALARS(X)                                      \
   X(sums_vmax2, float, 1, sums.vmax2, true)                       \
   X(sums_ke, float, 1, sums.ke, true)                             \
-  X(airfoil_force, float, 2, sums.force, true)                    \
+  X(airfoil_force, float, D, sums.force, true)                    \
   X(airfoil_moment, float, 1, sums.moment, true)                  \
-  X(wall_force, float, 2, sums.wall_force, true)                  \
-  X(total_force, float, 2, sums.total_force, true)                \
+  X(wall_force, float, D, sums.wall_force, true)                  \
+  X(total_force, float, D, sums.total_force, true)                \
   X(airfoil_contacts, int, 1, sums.contacts, true)                \
   X(recycled, long long, 1, recycled, true)                       \
   X(pushouts, long long, 1, pushouts, true)                       \
@@ -35,7 +35,9 @@
   X(block_moment_sum, double, 1, cur_moment, true)                \
   X(blocks_lift, double, kMaxBlocks, blk_lift, true)              \
   X(blocks_drag, double, kMaxBlocks, blk_drag, true)              \
-  X(blocks_moment, double, kMaxBlocks, blk_moment, true)
+  X(blocks_moment, double, kMaxBlocks, blk_moment, true)         \
+  X(inflow_distance, double, 1, inflow_x, true)                   \
+  X(conveyor_next, int, kMaxRows, conv_next, true)
 
 // X(name, C type, count, member of Control)
 #define CPS_WT_CONTROLS(X)              \
