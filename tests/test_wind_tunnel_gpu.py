@@ -98,3 +98,36 @@ def test_cold_beam_conveyor_on_cuda():
     rc, rg = sims["cpu"].scalars()["recycled"], sims["cuda"].scalars()["recycled"]
     assert rg > 1000 and abs(rg - rc) < 0.05 * rc
     assert len(np.unique(sim.field("id", copy=True))) == 4000
+
+
+@pytest.mark.parametrize("stack", [10, 128])
+@pytest.mark.parametrize("form", ["gather", "reflexive"])
+def test_lbvh_shared_memory_stack_matches_cpu(stack, form):
+    """The tree's walks keep their stacks in shared memory (128 entries: 64 KiB a block, above
+    the 48 KiB a launch gets unasked): the same contacts and forces as the CPU's gather."""
+    ov = {"inflow.speed": 1.0, "contact.form": form, "lbvh.stack": stack}
+    a = Simulation.from_scene(load_scene("wind-tunnel"), backend="cpu", particles=20_000, neighbors="lbvh",
+                              overrides={"inflow.speed": 1.0})
+    b = Simulation.from_scene(load_scene("wind-tunnel"), backend="cuda", particles=20_000, neighbors="lbvh",
+                              overrides=ov)
+    a.step(30)
+    ia = np.argsort(a.field("id"))
+    b.set_particles(a.positions[ia], a.velocities[ia])
+    a.evaluate()
+    b.evaluate()
+    assert b.state()["bad"] == 0
+    assert np.array_equal(_by_id(a, "contacts"), _by_id(b, "contacts"))
+    assert np.array_equal(_by_id(a, "number_density"), _by_id(b, "number_density"))
+    fa, fb = _by_id(a, "force").astype(np.float64), _by_id(b, "force").astype(np.float64)
+    assert np.abs(fa - fb).max() <= 1e-5 * np.abs(fa).max()
+
+
+@pytest.mark.parametrize("form", ["gather", "reflexive"])
+def test_lbvh_shared_stack_overflow_is_reported_on_cuda(form):
+    from corpuscle.simulation import UnstableRunError
+
+    s = Simulation.from_scene(load_scene("wind-tunnel"), backend="cuda", particles=20_000, neighbors="lbvh",
+                              overrides={"inflow.speed": 1.0, "contact.form": form, "lbvh.stack": 1})
+    with pytest.raises(UnstableRunError, match="lbvh.stack"):
+        s.run(steps=5)
+    assert s.state()["bad"] == 2 and s.state()["step"] == 0

@@ -16,6 +16,7 @@
 
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/polygon.h"
+#include "corpuscle/physics/polygon_grid.h"
 #include "cpu/exec_cpu.h"
 #include "testing_ops.h"
 
@@ -459,6 +460,56 @@ NB_MODULE(_testing, m) {
       nb::arg("vertices"), nb::arg("points"), nb::arg("layout") = "vertices",
       "Signed distance (negative inside), outward normal, closest point and feature of each point "
       "(float32 (m, 2)) against the counter-clockwise polygon (float32 (n, 2)).");
+  m.def(
+      "polygon_grid_sdf",
+      [](const Array& vertices, const Array& points, float reach, int resolution) {
+        std::vector<float> xy = points2(vertices, "vertices"), p = points2(points, "points");
+        int n = int(xy.size() / 2);
+        if (n < 3) throw nb::value_error("a polygon needs at least 3 vertices");
+        if (!(reach >= 0.0f)) throw nb::value_error("reach must not be negative");
+        std::vector<float> edges(size_t(kEdgeStride) * n);
+        polygon_write_edges(PolygonVertices{xy.data(), n}, edges.data());
+        PolygonEdges E{edges.data(), n};
+        const PolygonGridTables t = build_polygon_grid(E, reach, resolution);
+        const PolygonGrid G{E, t.view(t.start.data(), t.refs.data(), t.flag.data())};
+        size_t m = p.size() / 2;
+        std::vector<float> d(m), nrm(2 * m), q(2 * m);
+        std::vector<int32_t> edge(m), vertex(m), listed(m);
+        std::vector<uint8_t> inside(m), flag(m);
+        for (size_t i = 0; i < m; ++i) {
+          Vec2 x{{p[2 * i], p[2 * i + 1]}};
+          PolygonHit h = polygon_sdf(G, x);
+          d[i] = h.distance;
+          nrm[2 * i] = h.normal[0];
+          nrm[2 * i + 1] = h.normal[1];
+          q[2 * i] = h.closest[0];
+          q[2 * i + 1] = h.closest[1];
+          edge[i] = h.edge;
+          vertex[i] = h.vertex;
+          inside[i] = polygon_contains(G, x);
+          const int c = G.cells.cell_of(x);
+          flag[i] = c < 0 ? 255 : t.flag[size_t(c)];
+          listed[i] = c < 0 ? 0 : t.start[size_t(c) + 1] - t.start[size_t(c)];
+        }
+        nb::dict r;
+        r["distance"] = np(d);
+        r["normal"] = np(nrm, 2);
+        r["closest"] = np(q, 2);
+        r["edge"] = np(edge);
+        r["vertex"] = np(vertex);
+        r["inside"] = np(inside);
+        r["flag"] = np(flag);
+        r["listed"] = np(listed);
+        r["dims"] = nb::make_tuple(t.dims[0], t.dims[1]);
+        r["cell"] = t.cell;
+        r["origin"] = nb::make_tuple(t.origin[0], t.origin[1]);
+        r["refs"] = int(t.start.back());
+        return r;
+      },
+      nb::arg("vertices"), nb::arg("points"), nb::arg("reach"), nb::arg("resolution") = 256,
+      "polygon_sdf through physics/polygon_grid.h's grid for contacts within reach: the same dict, plus "
+      "each point's cell flag (0 far, 1 outside, 2 inside, 3 straddling, 255 off the grid), the edges its "
+      "cell lists, and the grid's dims, cell edge, origin and list length.");
   m.def(
       "polygon_edges",
       [](const Array& vertices) {

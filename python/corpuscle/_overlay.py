@@ -64,8 +64,9 @@ def draw_text(img: np.ndarray, text: str, x: int, y: int, size: int, color=(240,
 
 
 def format_tick(v: float) -> str:
-    """A compact tick label."""
-    if v == 0 or 1e-3 <= abs(v) < 1e5:
+    """A compact tick label (at most 8 characters for a positive value: 73,868.9 is
+    "7.39e+04", not "7.387e+04", which the colour-bar panel cuts off)."""
+    if v == 0 or 1e-3 <= abs(v) < 1e4:
         return f"{v:.4g}"
     return f"{v:.2e}"
 

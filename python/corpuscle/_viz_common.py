@@ -54,6 +54,28 @@ def units_of(name: str, header: dict | None = None) -> str:
     return UNITS.get(name, "")
 
 
+def render_hint(header: dict | None) -> dict[str, Any]:
+    """The kind's preferred colouring from the run header's ``render`` entry, checked:
+    ``color`` (a field name, or "speed"), ``range`` ((lo, hi) in the field's units, finite, lo <
+    hi), ``log`` (bool) and ``ramp`` (a name); keys that are absent or malformed are left out
+    (an old or hand-written header then gets the generic defaults)."""
+    raw = (header or {}).get("render")
+    out: dict[str, Any] = {}
+    if not isinstance(raw, dict):
+        return out
+    if isinstance(raw.get("color"), str) and raw["color"]:
+        out["color"] = raw["color"]
+    r = raw.get("range")
+    if (isinstance(r, (list, tuple)) and len(r) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                              and math.isfinite(v) for v in r) and r[0] < r[1]):
+        out["range"] = (float(r[0]), float(r[1]))
+    if isinstance(raw.get("log"), bool):
+        out["log"] = raw["log"]
+    if isinstance(raw.get("ramp"), str):
+        out["ramp"] = raw["ramp"]
+    return out
+
+
 def is_run_like(obj: Any) -> bool:
     """True for an opened run (or anything with its interface) rather than a path."""
     return hasattr(obj, "header") and hasattr(obj, "__getitem__") and hasattr(obj, "__len__")

@@ -32,8 +32,8 @@ import numpy as np
 from . import _camera, _colors, _overlay
 from ._video import VideoSink, open_sink, output_kind
 from ._errors import write_failure
-from ._viz_common import (os_reason, cli_warnings, open_run, parse_frames, parse_index, parse_size, require,
-                          scene_info, turned_points, units_of)
+from ._viz_common import (os_reason, cli_warnings, open_run, parse_frames, parse_index, parse_size, render_hint,
+                          require, scene_info, turned_points, units_of)
 
 
 class RenderError(ValueError):
@@ -219,10 +219,13 @@ class FrameRenderer:
     """Turns frames of one run into pictures.
 
     ``header`` is the run header. Options: ``size`` (width, height) in pixels; ``color`` a
-    per-particle field, ``"speed"`` or ``"none"`` (default: pressure in 2-D, speed or density in
-    3-D); ``value_range`` (lo, hi) in field units (default: robust percentiles of
-    ``sample_frames``, or of the frames seen so far, widened as needed); ``log`` colour on
-    log(1+v) (default: on for 2-D pressure); ``ramp`` a name in ``_colors.RAMPS``;
+    per-particle field, ``"speed"`` or ``"none"`` (default: the kind's choice in the header's
+    ``render`` entry when its field was recorded, e.g. the wind tunnel's number density over 0 to
+    4 times the free stream's; else pressure in 2-D, speed or density in 3-D); ``value_range``
+    (lo, hi) in field units (default: the kind's range for its field, else robust percentiles
+    of ``sample_frames``, or of the frames seen so far, widened as needed); ``log`` colour on
+    log(1+v) (default: the kind's, else on for 2-D pressure); ``ramp`` a name in
+    ``_colors.RAMPS``;
     ``camera`` (azimuth, elevation[, distance]) for 3-D; ``ghosts`` draws ghost particles;
     ``cutaway`` leaves out the particles nearer the camera than the rigid bodies' centres (or
     than the scene centre without bodies) so a die inside the fluid shows (default: on in
@@ -285,6 +288,12 @@ class FrameRenderer:
     def _resolve_color(self, frame) -> None:
         per = self._per_particle_fields(frame)
         req = self.color_request
+        hint = render_hint(self.header)
+        hinted = hint.get("color")
+        if hinted is not None and not (hinted in per or (hinted == "speed" and "velocity" in per)):
+            hint, hinted = {}, None  # the kind's field was not recorded: the generic defaults
+        if req is None and hinted is not None:
+            req = hinted  # the kind's choice (the wind tunnel: number density over the free stream's)
         if req is None:
             if self.dim == 2:
                 req = "pressure" if "pressure" in per else ("speed" if "velocity" in per else "none")
@@ -303,8 +312,17 @@ class FrameRenderer:
         else:
             options = sorted(per) + (["speed"] if "velocity" in per else [])
             raise RenderError(f"unknown --color field '{req}': recorded fields are {', '.join(options) or 'none'}")
-        self.log = self.log_request if self.log_request is not None else (self.dim == 2 and self.field == "pressure")
-        ramp = self.ramp_request or ("heat" if self.dim == 2 else "ocean")
+        by_hint = self.field is not None and self.field == hinted
+        if by_hint and self.value_range is None and "range" in hint:
+            self.value_range = hint["range"]  # fixed from the scene (the free stream's), not the frames'
+        if self.log_request is not None:
+            self.log = self.log_request
+        elif by_hint and "log" in hint:
+            self.log = hint["log"]
+        else:
+            self.log = self.dim == 2 and self.field == "pressure"
+        hint_ramp = hint.get("ramp") if by_hint and hint.get("ramp") in _colors.RAMPS else None
+        ramp = self.ramp_request or hint_ramp or ("heat" if self.dim == 2 else "ocean")
         self.lut = _colors.make_lut(ramp)
         self._trange = None if self.value_range is None else tuple(float(v) for v in _colors.transform(np.array(self.value_range), self.log))
         self.label = _field_label(self.field, self.header) if self.field else ""
@@ -751,8 +769,10 @@ def add_live_render_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--render", metavar="OUT", help="render frames as they are recorded to OUT (.mp4, .gif, .png or a directory)")
     g.add_argument("--render-size", metavar="WxH", default="1280x720", help="frame size in pixels (default 1280x720)")
     g.add_argument("--render-fps", metavar="FPS", default=30.0, help="video frame rate (default 30)")
-    g.add_argument("--render-color", metavar="FIELD", help="colour field (default: pressure in 2-D, speed in 3-D)")
-    g.add_argument("--render-range", metavar="LO:HI", help="colour range in field units (default: robust percentiles)")
+    g.add_argument("--render-color", metavar="FIELD", help="colour field (default: the kind's choice, e.g. the wind tunnel's number_density "
+                   "over 0 to 4x the free stream's; else pressure in 2-D, speed in 3-D)")
+    g.add_argument("--render-range", metavar="LO:HI", help="colour range in field units (default: the kind's range for its "
+                   "field, else robust percentiles)")
     g.add_argument("--render-camera", metavar="AZ,EL[,DIST]", help="3-D camera: azimuth, elevation (degrees), distance (m)")
     g.add_argument("--render-ghosts", action="store_true", help="draw ghost particles too")
 
@@ -845,8 +865,11 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", metavar="WxH", default="1280x720", help="picture size in pixels (default 1280x720)")
     p.add_argument("--fps", metavar="FPS", default=30.0, help="video frame rate (default 30)")
     p.add_argument("--color", metavar="FIELD", help="colour by a recorded per-particle field, 'speed' or 'none' "
-                                                    "(default: pressure in 2-D, speed or density in 3-D)")
-    p.add_argument("--range", metavar="LO:HI", help="colour range in field units (default: 1st-99th percentile)")
+                                                    "(default: the kind's choice, e.g. the wind tunnel's number_density over "
+                                                    "0 to 4x the free stream's; else pressure in 2-D, speed or density "
+                                                    "in 3-D)")
+    p.add_argument("--range", metavar="LO:HI", help="colour range in field units (default: the kind's range for its "
+                                                   "field, else the 1st-99th percentile)")
     scale = p.add_mutually_exclusive_group()
     scale.add_argument("--log", dest="log", action="store_true", default=None, help="colour on log(1+value) (default for 2-D pressure)")
     scale.add_argument("--linear", dest="log", action="store_false", help="colour on the value itself")

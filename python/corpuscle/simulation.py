@@ -117,6 +117,12 @@ def _check_state(state) -> None:
         raise TypeError(f"checkpoint must be the dict Simulation.checkpoint() returns, got {state!r}")
 
 
+
+def _bad_step(s: dict) -> int:
+    """The step a snapshot went bad at; a flag raised outside a step (by ``evaluate``, which
+    runs no finalize to note the step) is the current one."""
+    return int(s["bad_step"]) if int(s["bad_step"]) >= 0 else int(s["step"])
+
 class Simulation:
     """A scene running on one backend.
 
@@ -253,7 +259,7 @@ class Simulation:
                 budget -= k
             s = self.core.snapshot()
             if s["bad"]:
-                raise UnstableRunError(s["bad_step"], self.check_health() or "unstable")
+                raise UnstableRunError(_bad_step(s), self.check_health() or "unstable")
             if callback is not None and callback(self):
                 break
             if self.core.snapshot()["done"] or taken < k:
@@ -454,7 +460,7 @@ class Simulation:
         s = self.core.snapshot()
         if s["bad"]:
             reason = self.kind.unstable_reasons.get(s["bad"], "unsound state")
-            return f"unstable at step {s['bad_step']}: {reason}"
+            return f"unstable at step {_bad_step(s)}: {reason}"
         return None
 
     # measurement ----------------------------------------------------------------------

@@ -101,6 +101,13 @@ struct CpuExec {
     for_each(n, f);
   }
 
+  // for_each(n, f): the CUDA backend gives each thread of a block bytes_per_thread of shared
+  // memory (a traversal stack); here such scratch lives on the functor's own stack
+  template <class F>
+  void for_each_shared(int n, const F& f, size_t /*bytes_per_thread*/) const {
+    for_each(n, f);
+  }
+
   // parallel_for of a functor f(i, lanes) written for cooperating lanes: one lane per item
   template <class F>
   void for_each_lanes(int n, const F& f) const {

@@ -7,6 +7,7 @@
 #include <cuda_runtime.h>
 #include <thrust/iterator/counting_iterator.h>
 
+#include <atomic>
 #include <cstddef>
 #include <cub/cub.cuh>
 #include <cstring>
@@ -207,6 +208,7 @@ struct ScanPlus {
 struct CudaExec {
   static constexpr bool on_device = true;
   static constexpr int kBlock = 128;
+  static constexpr int kMaxDevices = 64;  // devices a per-device cache of function attributes covers
   static constexpr int kReduceThreads = 512;
   static constexpr int kSmallReduce = 1 << 14;
 
@@ -303,6 +305,27 @@ struct CudaExec {
     activate();
     if (n <= 0) return;
     k_for_each_bounded<kBlock, kMinBlocks><<<(n + kBlock - 1) / kBlock, kBlock, 0, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // for_each(n, f) with bytes_per_thread of the block's dynamic shared memory for each of its
+  // threads (a traversal stack: spatial/lbvh.h's lbvh_shared_stack finds its slice and its
+  // size from the launch); more than 48 KiB a block is requested from the device
+  template <class F>
+  void for_each_shared(int n, const F& f, size_t bytes_per_thread) {
+    activate();
+    if (n <= 0) return;
+    const size_t bytes = bytes_per_thread * size_t(kBlock);
+    if (bytes > 48 * 1024) {
+      // once per kernel, device and size (the first, eager step: not while a graph is captured)
+      static std::atomic<size_t> granted[kMaxDevices] = {};
+      const int d = device_ >= 0 && device_ < kMaxDevices ? device_ : 0;
+      if (granted[d].load() < bytes) {
+        CPS_CUDA_CHECK(cudaFuncSetAttribute(k_for_each<F>, cudaFuncAttributeMaxDynamicSharedMemorySize, int(bytes)));
+        granted[d].store(bytes);
+      }
+    }
+    k_for_each<<<(n + kBlock - 1) / kBlock, kBlock, bytes, stream_>>>(n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 

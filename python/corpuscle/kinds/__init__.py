@@ -62,8 +62,10 @@ Reading the state
 ``header(sim)`` *
     The kind's part of the run header (see docs/frame_format.md, "Run header"):
     ``container``, ``obstacles``, ``bodies`` and whatever else describes the run
-    (``particles``, ``h``, ``particle_radius``, ``units`` ...). The simulation adds
-    ``scene``, ``kind``, ``dim``, ``backend``, ``corpuscle_version``, ``parameters``.
+    (``particles``, ``h``, ``particle_radius``, ``units`` ...; ``render``: the kind's default
+    colouring for render and the live page, ``{"color": field, "range": [lo, hi], "log":
+    bool, "ramp": name}``). The simulation adds ``scene``, ``kind``, ``dim``, ``backend``,
+    ``corpuscle_version``, ``parameters``.
 ``frame(sim, ghosts, velocity)`` *
     Keyword arguments for ``FrameWriter.write_frame``. The default records the fields in
     ``frame_fields``, ``velocity`` when asked, the fields in ``ghost_fields`` when asked

@@ -41,8 +41,15 @@ MAX_PITCH = 45.0
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
 KMAX_ROWS = 16384  # the inflow conveyor's rows the core holds (scenes/wind_tunnel/model.h kMaxRows)
 
+# the LBVH traversal stack (entries per thread; shared memory on CUDA): the default and the most
+LBVH_STACK, LBVH_MAX_STACK = 32, 128
+
 UNSTABLE_REASONS = {1: "a particle position or velocity became non-finite (NaN/inf)",
-                    2: "an LBVH traversal stack would have overflowed (the tree is deeper than 64 levels)"}
+                    2: "an LBVH traversal needed more stack than lbvh.stack entries (--neighbors lbvh: raise "
+                       f"lbvh.stack, at most {LBVH_MAX_STACK}; the step was not taken)"}
+
+# the default colour range of render and the live viewer: number density 0 .. this x the free stream's
+RENDER_DENSITY_SPAN = 4.0
 
 INTEGRATORS = {"forward-euler": 0, "symplectic-euler": 1}
 CONTACT_FORMS = {"gather": 0, "reflexive": 1, "reflexive-warp": 2}
@@ -114,6 +121,9 @@ WIND_TUNNEL_KEYS: dict[str, KeySpec] = {
     "grid.cell": _K("float", 0.0, "m", 0.0, 1e3,
                     "cell edge of the broad-phase grid, at least a contact diameter (0: about one cell per "
                     "particle, sqrt(free area / N))"),
+    "lbvh.stack": _K("int", LBVH_STACK, "", 1, LBVH_MAX_STACK,
+                     "traversal stack entries per thread of the LBVH (--neighbors lbvh; CUDA keeps them in shared "
+                     "memory: 512 bytes a block per entry); a walk that needs more stops the run"),
     "measure.block_time": _K("float", 0.0, "s", 0.0, 1e6,
                              "initial averaging block length; 0: the steady part / 64 (blocks double as needed)"),
 }
@@ -343,6 +353,7 @@ class WindTunnel(Kind):
             # about one cell per particle: at 2,097,152 particles on the H200 2,574 steps/s
             # against 1,846 with cells of one contact diameter (most of them empty, 2026-12-01)
             "cell": float(v["grid.cell"]) or (math.sqrt(free_area / n) if d == 2 else (free / n) ** (1 / 3)),
+            "lbvh_stack": int(v["lbvh.stack"]),
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
@@ -440,7 +451,7 @@ class WindTunnel(Kind):
         if len(lo) == 3:
             cols.append(c["conv_z0"] + (r // ny) * c["conv_dz"])
         pts = np.column_stack(cols)
-        return pts[x < hi[0] - 0.45 * dx]  # jittered, still short of the outflow
+        return pts[x < hi[0]]
 
     @staticmethod
     def _conveyor(n, radius, lo, hi, poly) -> dict:
@@ -492,6 +503,11 @@ class WindTunnel(Kind):
         pts = WindTunnel._conveyor_slots(radius, lo, hi, params)
         gaps = [params["conv_dx"], params["conv_dy"]] + ([params["conv_dz"]] if d == 3 else [])
         pts = pts + rng.uniform(-1, 1, pts.shape) * 0.45 * (np.array(gaps) - 2 * radius)
+        # the last column up to the outflow, never past it: a column trimmed short of it would
+        # start the stream leaving late, and the conveyor's first slots would pass unfilled (a
+        # seam of vacancies moving downstream). Pulled back by at most its jitter, a slot stays
+        # more than a diameter from its neighbours (0.1 dx + 1.8 r apart at least)
+        pts[:, 0] = np.minimum(pts[:, 0], np.nextafter(hi[0], -np.inf))
         if d == 3:  # the periodic span
             pts[:, 2] = lo[2] + np.mod(pts[:, 2] - lo[2], hi[2] - lo[2])
         pts = pts[WindTunnel._clear(pts[:, :2], poly, 1.05 * radius)]  # (_conveyor made sure n of them are)
@@ -593,7 +609,19 @@ class WindTunnel(Kind):
                 "obstacles": [airfoil], **extra,
                 "bodies": [], "particles": sim.n_particles, "particle_radius": sim.info["radius"],
                 "mass": sim.info["mass"], "free_stream": [p["speed"]] + [0.0] * (self.dim - 1),
-                "units": dict(self.units)}
+                "units": dict(self.units), "render": self.render_defaults(sim)}
+
+    def render_defaults(self, sim) -> dict[str, Any]:
+        """How render and the live viewer colour this kind by default: the number density on a
+        fixed range from the free stream's, 0 to RENDER_DENSITY_SPAN times N / free area (3-D:
+        free volume). The seed's pressure (contact-force sums) is zero for nearly every
+        particle of the stream, so it showed black on black; the density shows the compressed
+        layer ahead of and under the airfoil (saturating), the stream (a quarter of the ramp)
+        and the rarefied wake behind it (dark)."""
+        free = float(sim.info["free_volume"] if self.dim == 3 else sim.info["free_area"])
+        n0 = sim.n_particles / free
+        return {"color": "number_density", "range": [0.0, RENDER_DENSITY_SPAN * n0], "log": False, "ramp": "heat",
+                "free_stream_density": n0}
 
     def control(self, sim, speed_scale=0.0, pitch=0.0) -> dict[str, list[float]]:
         """The re-entering free stream's speed is U (1 + speed_scale); the airfoil turns nose

@@ -4,7 +4,9 @@ Server -> page, over one websocket:
 
 1. one text message, JSON: ``{"type": "hello", "mode": "live"|"view", "header": <run header>,
    "scene": <the header's geometry checked and normalised (render's ``scene_info``), or null>,
-   "fields": [colourable field names], "controls": {name: length}, "limits": {name: max norm},
+   "fields": [colourable field names], "color": <the field the page colours by at first: the
+   kind's choice from the header's ``render`` entry, else density>, "controls": {name: length},
+   "limits": {name: max norm},
    "control": {name: current values}, "sliders": [the kind's sliders, ``Kind.live_controls``],
    "frames": <recorded frames, view mode>, "paused": bool, "max_message": bytes}``;
 2. then binary frames, each: a 48-byte little-endian header (:data:`HEAD`: magic ``CPSL``,

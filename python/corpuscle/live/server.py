@@ -21,6 +21,7 @@ from typing import Any, Callable
 import numpy as np
 
 from . import protocol
+from .._viz_common import render_hint
 
 STATIC_FILES = {"index.html": "text/html", "viewer.js": "text/javascript", "viewer.css": "text/css"}
 CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
@@ -314,10 +315,11 @@ class LiveServer:
         if self.mode == "live":
             await self._first_frame.wait()
         fields = self._fields()
-        client = _Client(ws, peer, "density" if "density" in fields else (fields[0] if fields else None))
+        client = _Client(ws, peer, default_color(self.header, fields))
         with self._lock:
             current = {k: list(v) for k, v in self._current.items()}
         hello = {"type": "hello", "mode": self.mode, "header": self.header, "scene": self.scene, "fields": fields,
+                 "color": client.color,
                  "controls": self.controls, "limits": {k: protocol.LIMITS.get(k, protocol.DEFAULT_LIMIT)
                                                         for k in self.controls},
                  "control": current, "sliders": self.sliders,
@@ -421,6 +423,15 @@ class LiveServer:
         return data
 
 
+def default_color(header: dict, fields: list[str]) -> str | None:
+    """The field a new page colours by: the kind's choice (the header's ``render`` entry) when
+    the frames carry it, else density, else the first field."""
+    hinted = render_hint(header).get("color")
+    if hinted in fields:
+        return hinted
+    return "density" if "density" in fields else (fields[0] if fields else None)
+
+
 def encode(frame: dict, header: dict, color: str | None) -> bytes:
     """A frame dict (see :class:`LiveServer`) as one binary message."""
     pos = np.asarray(frame["positions"])
@@ -429,7 +440,8 @@ def encode(frame: dict, header: dict, color: str | None) -> bytes:
     col = None
     values = (frame.get("fields") or {}).get(color) if color else None
     if values is not None and len(values) == len(pos):
-        col, vrange = protocol.color_bytes(values)
+        hint = render_hint(header)
+        col, vrange = protocol.color_bytes(values, hint.get("range") if hint.get("color") == color else None)
         overlay["color"] = {"field": color, "range": vrange,
                             "unit": (header.get("units") or {}).get(color, "")}
     return protocol.encode_frame(frame.get("index", 0), frame.get("step", 0), frame.get("time", 0.0), pos,

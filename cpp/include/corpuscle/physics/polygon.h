@@ -162,14 +162,20 @@ CPS_HD CPS_INLINE bool polygon_contains(const Poly& P, const Vec2& p) {
   return in;
 }
 
+// the closest feature over the edges ids[0, count) (ascending edge indices; null: every
+// edge, count = n) with the sign from the crossing parity over the same edges (sign < 0), or
+// given (0 outside, 1 inside: a caller that knows it). polygon_sdf is this over every edge;
+// a subset that holds every edge as near to p as the nearest and every edge the ray from p
+// can cross gives the same hit, bit for bit (physics/polygon_grid.h's cells)
 template <class Poly>
-CPS_HD CPS_INLINE PolygonHit polygon_sdf(const Poly& P, const Vec2& p) {
+CPS_HD CPS_INLINE PolygonHit polygon_sdf_over(const Poly& P, const Vec2& p, const int* ids, int count, int sign) {
   const int n = P.size();
   float best = 1e30f;
   int bi = 0;
   float bt = 0.0f;
-  bool in = false;
-  for (int i = 0; i < n; ++i) {
+  bool in = sign > 0;
+  for (int k = 0; k < count; ++k) {
+    const int i = ids ? ids[k] : k;
     PolygonEdge g = P.edge(i);
     float dx = g.bx - g.ax, dy = g.by - g.ay;
     float px = p[0] - g.ax, py = p[1] - g.ay;
@@ -177,7 +183,7 @@ CPS_HD CPS_INLINE PolygonHit polygon_sdf(const Poly& P, const Vec2& p) {
     float ex = px - t * dx, ey = py - t * dy;
     float d2 = ex * ex + ey * ey;
     if (d2 < best) { best = d2; bi = i; bt = t; }
-    if (ray_crosses(g, p)) in = !in;
+    if (sign < 0 && ray_crosses(g, p)) in = !in;
   }
   PolygonHit h;
   PolygonEdge g = P.edge(bi);
@@ -211,6 +217,12 @@ CPS_HD CPS_INLINE PolygonHit polygon_sdf(const Poly& P, const Vec2& p) {
   float sl = norm(s);
   h.normal = sl > 0.0f ? s * (1.0f / sl) : Vec2{{e1.nx, e1.ny}};
   return h;
+}
+
+// the signed distance, normal and closest point over every edge
+template <class Poly>
+CPS_HD CPS_INLINE PolygonHit polygon_sdf(const Poly& P, const Vec2& p) {
+  return polygon_sdf_over(P, p, nullptr, P.size(), -1);
 }
 
 }  // namespace cps

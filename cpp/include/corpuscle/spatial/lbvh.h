@@ -17,13 +17,22 @@
 //    memory fence that precedes the atomic (release), and the sibling's box is read after
 //    it from L2 (__ldcg on the device: no stale L1 line), so the arrival order never lets a
 //    thread read a box that is not yet written;
-// 5. a gather query: each point walks the tree from the root with its query box on a stack
-//    of kLbvhStack nodes; a stack that would overflow raises `overflow` (the caller stops
-//    the run) instead of silently skipping a subtree, as the original did.
+// 5. a gather query: each point walks the tree from the root with its query box, going down
+//    into a child the box overlaps and keeping the other one (when both overlap) on a stack
+//    of `stack_depth` nodes; a stack that would overflow raises `overflow` (the caller stops
+//    the run) instead of silently skipping a subtree, as the original did. The walk is
+//    written once (LbvhView::walk); its stack is the backend's: a local array on the CPU,
+//    this thread's slice of the launch's dynamic shared memory on the device (the seed's
+//    choice: the stack traffic stays on the SM, not in local memory), entry k of thread t at
+//    k * blockDim + t, so a warp's lanes hit distinct banks at any depth. A kernel launched
+//    with too little shared memory gets a shallower stack and raises the flag: never a
+//    write past the slice (lbvh_shared_stack). Launch with Exec::for_each_shared(n, f,
+//    lbvh_stack_bytes(depth)).
 //
 // The view answers gather(i, xi, visit) like every index (index.h): visit(j, xi - x_j, r2)
 // for every j (i included) with r2 < radius^2, in an order fixed by the tree (deterministic).
 #pragma once
+#include <cstddef>
 #include <cstdint>
 
 #include "corpuscle/core/atomics.h"
@@ -32,7 +41,50 @@
 
 namespace cps {
 
-constexpr int kLbvhStack = 64;
+// traversal stack entries per thread: the default, and the most a scene may ask for (the size
+// of the CPU's local array; on the device 128 threads x 4 bytes x depth of shared memory per
+// block). The walk below keeps one entry per level where the query box overlaps both
+// children, so the depth a query needs grows with the tree's depth only where the box
+// straddles splits: the default wind tunnel needs 5 or 6 at 131,072 and 2,097,152 particles
+// (see docs/architecture.md).
+constexpr int kLbvhStack = 32;
+constexpr int kLbvhMaxStack = 128;
+
+// bytes of dynamic shared memory per thread a launch reserves for a stack of depth entries
+constexpr size_t lbvh_stack_bytes(int depth) { return size_t(depth) * sizeof(int); }
+
+// a traversal stack of `depth` entries, entry k at base[k * stride]
+struct LbvhStack {
+  int* base;
+  int stride;
+  int depth;
+  CPS_HD CPS_INLINE int& at(int k) const { return base[k * stride]; }
+};
+
+#ifdef __CUDA_ARCH__
+// this thread's slice of the launch's dynamic shared memory (what Exec::for_each_shared
+// reserved): entry k of thread t at k * threads + t. As many entries as were asked for, or as
+// fit in what the launch reserved when that is less (none: depth 0, and the first push
+// raises the overflow flag)
+__device__ CPS_INLINE LbvhStack lbvh_shared_stack(int depth) {
+  extern __shared__ int cps_lbvh_stack_smem[];
+  unsigned bytes;
+  asm("mov.u32 %0, %%dynamic_smem_size;" : "=r"(bytes));
+  const int threads = int(blockDim.x * blockDim.y * blockDim.z);
+  const int t = int(threadIdx.x + blockDim.x * (threadIdx.y + blockDim.y * threadIdx.z));
+  const int have = int(bytes / (unsigned(sizeof(int)) * unsigned(threads)));
+  return LbvhStack{cps_lbvh_stack_smem + t, threads, depth < have ? depth : have};
+}
+#endif
+
+// read-only loads of the tree (the read-only data path on the device)
+CPS_HD CPS_INLINE int lbvh_ro(const int* p) {
+#ifdef __CUDA_ARCH__
+  return __ldg(p);
+#else
+  return *p;
+#endif
+}
 
 struct LbvhBox {
   float lo[3], hi[3];
@@ -184,47 +236,92 @@ struct LbvhView {
   float radius = 0.0f;
   int* overflow = nullptr;  // raised (overflow_code, if still 0) when a traversal stack would overflow
   int overflow_code = 1;
+  int stack_depth = kLbvhStack;  // traversal stack entries (at most kLbvhMaxStack on the CPU)
 
   CPS_HD int size() const { return n; }
   CPS_HD bool active(int) const { return true; }
   CPS_HD const Vec<D>& position(int i) const { return pos[i]; }
   CPS_HD float max_radius() const { return radius; }
 
-  // every slot j whose position lies in the box [qlo, qhi] (tree order)
-  template <class Visit>
-  CPS_HD void query_box(const float* qlo, const float* qhi, Visit&& visit) const {
+  // does the query box [qlo, qhi] overlap internal node c's box?
+  CPS_HD CPS_INLINE bool overlaps(int c, const float* qlo, const float* qhi) const {
+    const float* b = boxes + 2 * D * c;
+#ifdef __CUDA_ARCH__
+    if constexpr (D == 2) {  // one 16-byte load: lo x, lo y, hi x, hi y
+      const float4 q = __ldg(reinterpret_cast<const float4*>(b));
+      return q.x <= qhi[0] && q.y <= qhi[1] && q.z >= qlo[0] && q.w >= qlo[1];
+    }
+#endif
+    bool hit = true;
+    for (int k = 0; k < D; ++k) hit = hit && b[k] <= qhi[k] && b[D + k] >= qlo[k];
+    return hit;
+  }
+  CPS_HD CPS_INLINE bool in_box(int j, const float* qlo, const float* qhi) const {
+    bool in = true;
+    for (int k = 0; k < D; ++k) in = in && pos[j][k] >= qlo[k] && pos[j][k] <= qhi[k];
+    return in;
+  }
+
+  // The walk, written once for both queries and every backend: from the root, each node's
+  // children are met right one first (a leaf child is visited there and then), and the walk
+  // goes down into the left child the box overlaps, keeping the right one on the stack when
+  // both do (the order of the stack traversal that pushed both: the same leaves in the same
+  // order). kAfter: only slots j > i, and subtrees whose rightmost leaf is not right of i
+  // are skipped (the reflexive traversal: each pair met once, by its lower slot). A push
+  // onto a full stack raises the overflow flag and skips that subtree (the caller discards
+  // the step and stops the run).
+  template <bool kAfter, class Visit>
+  CPS_HD void walk(const LbvhStack& st, int i, const float* qlo, const float* qhi, Visit& visit) const {
     if (n == 1) {
-      bool in = true;
-      for (int k = 0; k < D; ++k) in = in && pos[0][k] >= qlo[k] && pos[0][k] <= qhi[k];
-      if (in) visit(0);
+      if (!kAfter && in_box(0, qlo, qhi)) visit(0);
       return;
     }
-    int stack[kLbvhStack];
-    int sp = 0;
-    stack[sp++] = 0;
-    while (sp > 0) {
-      const int node = stack[--sp];
-      const int kids[2] = {left[node], right[node]};
-      for (int c = 1; c >= 0; --c) {  // the right child pushed first: the left one is walked first
+    int node = 0, sp = 0;
+    for (;;) {
+      const int kids[2] = {lbvh_ro(left + node), lbvh_ro(right + node)};
+      bool down[2] = {false, false};
+      for (int c = 1; c >= 0; --c) {
         const int ch = kids[c];
         if (ch >= n - 1) {
           const int j = ch - (n - 1);
-          bool in = true;
-          for (int k = 0; k < D; ++k) in = in && pos[j][k] >= qlo[k] && pos[j][k] <= qhi[k];
-          if (in) visit(j);
+          if (kAfter && j <= i) continue;
+          if (in_box(j, qlo, qhi)) visit(j);
         } else {
-          const float* b = boxes + 2 * D * ch;
-          bool hit = true;
-          for (int k = 0; k < D; ++k) hit = hit && b[k] <= qhi[k] && b[D + k] >= qlo[k];
-          if (!hit) continue;
-          if (sp == kLbvhStack) {
-            atomic_cas(overflow, 0, overflow_code);
-            continue;
-          }
-          stack[sp++] = ch;
+          if (kAfter && lbvh_ro(rightmost + ch) <= i) continue;  // no leaf right of i below it
+          down[c] = overlaps(ch, qlo, qhi);
         }
       }
+      if (down[0]) {
+        if (down[1]) {
+          if (sp < st.depth) st.at(sp++) = kids[1];
+          else atomic_cas(overflow, 0, overflow_code);
+        }
+        node = kids[0];
+      } else if (down[1]) {
+        node = kids[1];
+      } else {
+        if (sp == 0) return;
+        node = st.at(--sp);
+      }
     }
+  }
+
+  // the walk with the backend's stack (see the header)
+  template <bool kAfter, class Visit>
+  CPS_HD void walk(int i, const float* qlo, const float* qhi, Visit& visit) const {
+#ifdef __CUDA_ARCH__
+    walk<kAfter>(lbvh_shared_stack(stack_depth), i, qlo, qhi, visit);
+#else
+    int local[kLbvhMaxStack];
+    walk<kAfter>(LbvhStack{local, 1, stack_depth < kLbvhMaxStack ? stack_depth : kLbvhMaxStack}, i, qlo, qhi,
+                 visit);
+#endif
+  }
+
+  // every slot j whose position lies in the box [qlo, qhi] (tree order)
+  template <class Visit>
+  CPS_HD void query_box(const float* qlo, const float* qhi, Visit&& visit) const {
+    walk<false>(-1, qlo, qhi, visit);
   }
 
   // every slot j > i whose position lies in the box: the reflexive traversal, which skips a
@@ -232,35 +329,7 @@ struct LbvhView {
   // lower slot)
   template <class Visit>
   CPS_HD void query_box_after(int i, const float* qlo, const float* qhi, Visit&& visit) const {
-    if (n == 1) return;
-    int stack[kLbvhStack];
-    int sp = 0;
-    stack[sp++] = 0;
-    while (sp > 0) {
-      const int node = stack[--sp];
-      const int kids[2] = {left[node], right[node]};
-      for (int c = 1; c >= 0; --c) {
-        const int ch = kids[c];
-        if (ch >= n - 1) {
-          const int j = ch - (n - 1);
-          if (j <= i) continue;
-          bool in = true;
-          for (int k = 0; k < D; ++k) in = in && pos[j][k] >= qlo[k] && pos[j][k] <= qhi[k];
-          if (in) visit(j);
-        } else {
-          if (rightmost[ch] <= i) continue;  // no leaf right of i below it
-          const float* b = boxes + 2 * D * ch;
-          bool hit = true;
-          for (int k = 0; k < D; ++k) hit = hit && b[k] <= qhi[k] && b[D + k] >= qlo[k];
-          if (!hit) continue;
-          if (sp == kLbvhStack) {
-            atomic_cas(overflow, 0, overflow_code);
-            continue;
-          }
-          stack[sp++] = ch;
-        }
-      }
-    }
+    walk<true>(i, qlo, qhi, visit);
   }
 
   template <class Visit>
@@ -337,10 +406,10 @@ class Lbvh {
     ex.for_each(n_, LbvhFitFn<D>{sorted, n_, left_.data(), right_.data(), parent_.data(), visits_.data(),
                                  boxes_.data()});
   }
-  // overflow: where a traversal raises code when its stack would overflow
-  LbvhView<D> view(const Vec<D>* sorted, int* overflow, int code) {
+  // overflow: where a traversal raises code when its stack (of depth entries) would overflow
+  LbvhView<D> view(const Vec<D>* sorted, int* overflow, int code, int depth = kLbvhStack) {
     return LbvhView<D>{sorted, left_.data(), right_.data(), rightmost_.data(), boxes_.data(), n_, radius_, overflow,
-                       code};
+                       code, depth};
   }
 
  private:

@@ -419,7 +419,9 @@
     $('title').textContent = `${S.header.scene || (S.scene && S.scene.name) || 'run'} (${S.header.kind || '?'}, ${S.dim}-D) · ${h.mode === 'live' ? 'live' : 'recorded'}`;
     const sel = $('color-by');
     for (const name of h.fields || []) { const o = document.createElement('option'); o.value = o.textContent = name; sel.appendChild(o); }
-    sel.value = (h.fields || []).includes('density') ? 'density' : ((h.fields || [])[0] || '');
+    // the server's choice for this kind (the header's render entry), else density, else the first
+    sel.value = (h.fields || []).includes(h.color) ? h.color
+      : ((h.fields || []).includes('density') ? 'density' : ((h.fields || [])[0] || ''));
     const ctl = h.controls || {};
     if (h.mode === 'live') {
       $('live-controls').hidden = false;

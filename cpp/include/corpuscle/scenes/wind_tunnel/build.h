@@ -35,6 +35,10 @@ inline Model<D> build_model(const ParamSource& p, const ArraySource* arrays) {
   m.radius = p.f("radius");
   m.cell = p.has("cell") ? p.f("cell") : 0.0f;
   if (!(m.cell >= 0.0f) || !finite(m.cell)) throw Error(kind + ": cell must be finite and not negative");
+  m.lbvh_stack = p.has("lbvh_stack") ? int(p.integer("lbvh_stack")) : kLbvhStack;
+  if (m.lbvh_stack < 1 || m.lbvh_stack > kLbvhMaxStack)
+    throw Error(kind + ": lbvh_stack must be 1 to " + std::to_string(kLbvhMaxStack) + ", got " +
+                std::to_string(m.lbvh_stack));
   m.mass = p.f("mass");
   m.collide = p.has("collide") ? int(p.integer("collide") != 0) : 1;
   m.reflexive = p.has("reflexive") ? int(p.integer("reflexive")) : 0;

@@ -16,6 +16,7 @@
 #pragma once
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/polygon.h"
+#include "corpuscle/physics/polygon_grid.h"
 #include "corpuscle/sim/table.h"
 #include "corpuscle/spatial/cell_grid.h"
 
@@ -50,6 +51,7 @@ struct Model {
   float speed;           // free-stream speed U (along +x)
   float thermal;         // per-component thermal velocity spread / U (0: the seed's cold beam)
   float cell;            // the broad-phase grid's cell edge (m), at least a contact diameter
+  int lbvh_stack;        // LBVH traversal stack entries per thread (shared memory on the device)
   float dt_fraction;     // the fastest particle moves at most this fraction of the radius per step
   float dt_max;
   Vec2 quarter_chord;    // moment reference point (in x-y; D = 3: the quarter-chord line along z)
@@ -65,7 +67,10 @@ struct Model {
   int n_edges;
   Box2 bbox;             // of the airfoil (in x-y)
   float edges[kEdgeStride * kMaxEdges];  // polygon edge records (polygon.h)
+  PolygonGridCells foil_cells;  // the edges' grid (polygon_grid.h; its tables: the pipeline's buffers)
   CPS_HD PolygonEdges airfoil() const { return PolygonEdges{edges, n_edges}; }
+  // the airfoil through its grid: the contact and push-out queries (the same hits as airfoil())
+  CPS_HD PolygonGrid airfoil_grid() const { return PolygonGrid{airfoil(), foil_cells}; }
 };
 
 // per-step reductions (combined in a fixed order per backend)

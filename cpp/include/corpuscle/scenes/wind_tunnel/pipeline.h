@@ -79,6 +79,17 @@ class Pipeline {
       : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)), tree_(m.lo, m.hi, 2.0f * m.radius * (1.0f + 1e-6f)) {
     const int n = m.n;
     if (n <= 0) throw Error(std::string(kind) + ": no particles");
+    if (m_.n_edges > 0) {
+      // the airfoil's edge grid, built once and copied to the backend with the model
+      const PolygonGridTables t = build_polygon_grid(m_.airfoil(), m_.radius);
+      foil_start_.resize(t.start.size());
+      foil_refs_.resize(t.refs.size());
+      foil_flag_.resize(t.flag.size());
+      ex_.to_device(foil_start_.data(), t.start.data(), t.start.size() * sizeof(int));
+      ex_.to_device(foil_refs_.data(), t.refs.data(), t.refs.size() * sizeof(int));
+      ex_.to_device(foil_flag_.data(), t.flag.data(), t.flag.size());
+      m_.foil_cells = t.view(foil_start_.data(), foil_refs_.data(), foil_flag_.data());
+    }
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(Model));
     for (int p = 0; p < 2; ++p) {
@@ -155,16 +166,21 @@ class Pipeline {
     // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest)
     auto contacts = [&](const auto& view) {
       using V = std::decay_t<decltype(view)>;
+      // the tree's walks keep their stacks in shared memory on the device (spatial/lbvh.h)
+      auto walking = [&](const auto& f) {
+        if constexpr (kTree) ex_.for_each_shared(n, f, lbvh_stack_bytes(m_.lbvh_stack));
+        else ex_.for_each(n, f);
+      };
       if (m_.collide && m_.reflexive) {
         ex_.for_each(n, ZeroContactsStage<D>{s});
-        ex_.for_each(n, PairStage<D, V>{md, g, s, view});
+        walking(PairStage<D, V>{md, g, s, view});
       }
-      ex_.for_each(n, ForceStage<D, V>{md, g, u_, s, view, grid_.spec()});
+      walking(ForceStage<D, V>{md, g, u_, s, view, grid_.spec()});
     };
     if constexpr (Index::kGrid) {
       contacts(grid_.view(s.pos).with_radius(2.0f * m_.radius));  // the contact reach, whatever the cell
     } else if constexpr (kTree) {
-      contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal));
+      contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal, m_.lbvh_stack));
     } else {
       const float reach = 2.0f * m_.radius;
       contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});
@@ -269,6 +285,8 @@ class Pipeline {
   CellGrid<D, Exec> grid_;
   Lbvh<D, Exec> tree_;
   Buf<Model> model_;
+  Buf<int> foil_start_, foil_refs_;  // the airfoil's edge grid (polygon_grid.h)
+  Buf<unsigned char> foil_flag_;
   Buf<Vec<D>> pos_[2], vel_[2];
   Buf<int> id_[2];
   Buf<int> scat_[2];

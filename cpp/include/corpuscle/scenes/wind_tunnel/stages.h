@@ -236,7 +236,7 @@ CPS_HD CPS_INLINE Vec<D> boundary_forces(const Model<D>& m, const AirfoilFrame& 
   if (m.n_edges > 0 && box_distance2(m.bbox, xb) < m.radius * m.radius) {
     PolygonHit hit;
     Vec2 f2;
-    if (polygon_contact_force(m.wing, m.airfoil(), xb, af.dir_to_body(xy(v)), m.radius, f2, mag, hit)) {
+    if (polygon_contact_force(m.wing, m.airfoil_grid(), xb, af.dir_to_body(xy(v)), m.radius, f2, mag, hit)) {
       f2 = af.dir_to_world(f2);
       F += from_xy<D>(f2);
       pressure += mag;
@@ -300,21 +300,69 @@ CPS_HD CPS_INLINE float block_density(const AllPairsView<D>& all, const CellGrid
   return float(count - 1) / block_measure(spec, block_cells(spec, c));
 }
 
-template <int D>
-CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec<D>& x) {
+// the tree: one box query of the 3^D cells (a little wider), each slot found counted when its
+// cell is in the block. With a visitor (the contact gather), the same walk also visits every
+// slot of the contact reach: the query box is the union of the block's and the reach's (the
+// block holds the reach unless x lies outside the grid), a slot is a contact candidate when
+// it lies in the reach's box (as in gather), and the walk meets those slots in the order
+// gather would (the tree's order does not depend on the box): one walk instead of two, the
+// same contacts summed in the same order
+template <int D, class Visit>
+CPS_HD CPS_INLINE float tree_block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec<D>& x,
+                                           Visit* contact) {
   int c[D], cj[D];
   spec.cell_of(x, c);
-  float qlo[D], qhi[D];
+  float qlo[D], qhi[D], rlo[D], rhi[D];
   for (int k = 0; k < D; ++k) {
     qlo[k] = spec.origin[k] + float(c[k] - 1) * spec.cell - 1e-3f * spec.cell;
     qhi[k] = spec.origin[k] + float(c[k] + 2) * spec.cell + 1e-3f * spec.cell;
+    rlo[k] = x[k] - tree.radius;
+    rhi[k] = x[k] + tree.radius;
+    if (contact) {
+      qlo[k] = fmin2(qlo[k], rlo[k]);
+      qhi[k] = fmax2(qhi[k], rhi[k]);
+    }
   }
+  const float r2 = tree.radius * tree.radius;
   int count = 0;
   tree.query_box(qlo, qhi, [&](int j) {
-    spec.cell_of(tree.pos[j], cj);
+    const Vec<D> pj = tree.pos[j];
+    if (contact) {
+      bool in = true;
+      for (int k = 0; k < D; ++k) in = in && pj[k] >= rlo[k] && pj[k] <= rhi[k];
+      if (in) {
+        const Vec<D> d = x - pj;
+        const float rr = norm2(d);
+        if (rr < r2) (*contact)(j, d, rr);
+      }
+    }
+    spec.cell_of(pj, cj);
     count += in_block<D>(c, cj) ? 1 : 0;
   });
   return float(count - 1) / block_measure(spec, block_cells(spec, c));
+}
+template <int D>
+struct NoContactVisit {
+  CPS_HD void operator()(int, const Vec<D>&, float) const {}
+};
+template <int D>
+CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec<D>& x) {
+  return tree_block_density(tree, spec, x, static_cast<NoContactVisit<D>*>(nullptr));
+}
+
+// the contacts by gather (visit(j, x - x_j, r2) for every slot of the contact reach, i
+// included) and the number density around x: the index's gather, then its block count; the
+// tree does both in one walk (tree_block_density)
+template <int D, class View, class Visit>
+CPS_HD CPS_INLINE float gather_and_density(const View& view, const CellGridSpec<D>& spec, int i, const Vec<D>& x,
+                                           Visit& visit) {
+  view.gather(i, x, visit);
+  return block_density(view, spec, x);
+}
+template <int D, class Visit>
+CPS_HD CPS_INLINE float gather_and_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, int, const Vec<D>& x,
+                                           Visit& visit) {
+  return tree_block_density(tree, spec, x, &visit);
 }
 
 // the reflexive form, stage 2a: the per-particle contact sums zeroed
@@ -432,26 +480,30 @@ struct ForceStage {
     const Vec<D>* vel = s.vel;
     const float r = m.radius;
     const SpringDashpot law = m.pp;
+    float density = 0.0f;
+    // the pair (i, j), j's displacement seen from i's image x + shift e_z (shift 0: x itself)
+    auto touch = [&](int j, float shift) {
+      Vec<D> f;
+      float mag;
+      if (pair_contact_force_d<D>(law, image_displacement(x, pos[j], shift), v, r, vel[j], r, f, mag)) {
+        F += f;
+        pressure += mag;
+        contacts += 1;
+      }
+    };
     if (m.collide && m.reflexive) {
       // the pairs were summed by PairStage
       F = s.force[i];
       pressure = s.pressure[i];
       contacts = s.contacts[i];
+      density = block_density(grid, spec, x);
     } else if (m.collide) {
-      // the pair (i, j), j's displacement seen from i's image x + shift e_z (shift 0: x itself)
-      auto touch = [&](int j, float shift) {
-        Vec<D> f;
-        float mag;
-        if (pair_contact_force_d<D>(law, image_displacement(x, pos[j], shift), v, r, vel[j], r, f, mag)) {
-          F += f;
-          pressure += mag;
-          contacts += 1;
-        }
-      };
-      grid.gather(i, x, [&](int j, const Vec<D>&, float) {
+      // the gather and the number density (one walk of the tree for both)
+      auto pair = [&](int j, const Vec<D>&, float) {
         if (j == i) return;
         touch(j, 0.0f);
-      });
+      };
+      density = gather_and_density(grid, spec, i, x, pair);
       if constexpr (D == 3) {
         const float shift = span_image(m, x[2], image_reach(m));
         if (shift != 0.0f) {
@@ -461,8 +513,6 @@ struct ForceStage {
         }
       }
     }
-    float density = 0.0f;
-    if (m.collide) density = block_density(grid, spec, x);
     StepSums<D> it = StepSums<D>::identity();
     int scattered = s.scattered[i];
     F += boundary_forces(m, airfoil_frame(m, *ctl), x, v, pressure, contacts, it, scattered);
@@ -721,12 +771,12 @@ CPS_HD CPS_INLINE bool keep_out(const Model<D>& m, const AirfoilFrame& af, Vec<D
   }
   // (in the airfoil's built frame: af)
   Vec2 xb = af.to_body(xy(x));
-  if (m.n_edges > 0 && box_distance2(m.bbox, xb) == 0.0f && polygon_contains(m.airfoil(), xb)) {
-    PolygonHit hit = polygon_sdf(m.airfoil(), xb);
+  if (m.n_edges > 0 && box_distance2(m.bbox, xb) == 0.0f && polygon_contains(m.airfoil_grid(), xb)) {
+    PolygonHit hit = polygon_sdf(m.airfoil_grid(), xb);
     float step = 0.05f * m.radius;
     for (int k = 0; k < 8; ++k) {
       xb = hit.closest + hit.normal * step;
-      if (!polygon_contains(m.airfoil(), xb)) break;
+      if (!polygon_contains(m.airfoil_grid(), xb)) break;
       step *= 2.0f;
     }
     set_xy(x, af.to_world(xb));
