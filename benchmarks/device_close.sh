@@ -29,6 +29,7 @@ say batch 4096 x 1000 by lane width
 for w in 0 32 16 8; do
   timeout 40 corpuscle bench magic8ball $B --particles 1000 --batch 4096 --steps 100 --repeats 3 --set sph.lanes=$w | head -2 | tail -1 | sed "s/^/lanes=$w /" | tee -a "$log"
 done
+timeout 40 corpuscle bench magic8ball $B --particles 1000 --batch 4096 --steps 100 --repeats 3 --set sph.list_build=cells | head -2 | tail -1 | sed "s/^/list_build=cells /" | tee -a "$log"
 say fluid box and dam break: grid vs lists
 timeout 60 corpuscle bench fluid-box $B --particles 131072 --neighbors grid lists --steps 200 --repeats 3 | tee -a "$log"
 timeout 90 corpuscle bench fluid-box $B --particles 1048576 --neighbors grid lists --steps 50 --repeats 3 --warmup 10 | tee -a "$log"

@@ -35,7 +35,8 @@ def by_id(sim, name):
 
 
 def batch(lanes, backend="serial", n=3, **kw):
-    return Batch.from_scene("magic8ball", n=n, backend=backend, particles=260, neighbors="lists", settle=0.0,
+    kw.setdefault("particles", 260)  # (a test may give per-scene counts)
+    return Batch.from_scene("magic8ball", n=n, backend=backend, neighbors="lists", settle=0.0,
                             randomize=False, shake=[], overrides={"sph.lanes": lanes}, **kw)
 
 

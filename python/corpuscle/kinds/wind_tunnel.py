@@ -507,7 +507,7 @@ class WindTunnel(Kind):
         # start the stream leaving late, and the conveyor's first slots would pass unfilled (a
         # seam of vacancies moving downstream). Pulled back by at most its jitter, a slot stays
         # more than a diameter from its neighbours (0.1 dx + 1.8 r apart at least)
-        pts[:, 0] = np.minimum(pts[:, 0], np.nextafter(hi[0], -np.inf))
+        pts[:, 0] = np.minimum(pts[:, 0], float(np.nextafter(np.float32(hi[0]), np.float32(-np.inf))))  # (float32)
         if d == 3:  # the periodic span
             pts[:, 2] = lo[2] + np.mod(pts[:, 2] - lo[2], hi[2] - lo[2])
         pts = pts[WindTunnel._clear(pts[:, :2], poly, 1.05 * radius)]  # (_conveyor made sure n of them are)

@@ -226,11 +226,7 @@ struct CellGridView {
 
   // tags in order, then the cells around xi's cell (z, y, x, each from low to high; cells
   // outside the grid skipped, so a grid narrower than three cells visits no cell twice), then
-  // each cell's slots in sorted order. Written as "find the next candidate within the radius,
-  // then visit it" (a cursor over tag, cell and slot): on a device the lanes of a warp search
-  // apart (a few instructions a candidate) and run the visitor together, so the one candidate
-  // in six that is a neighbour does not cost every other lane an idle pass through the
-  // visitor. The order of the visits is the nested loops' (the same results on every backend).
+  // each cell's slots in sorted order
   template <bool kPairs, class Visit>
   CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit) const {
     int c[D];
@@ -245,45 +241,26 @@ struct CellGridView {
       t0 = spec.tag_of_key(keys[i]);
       t1 = t0 + 1;
     }
-    if (t0 >= t1) return;
     const uint64_t dx = uint64_t(spec.dims[0]);
     const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
-    // the cursor: tag t, cell (x, y, z), the cell's slots [j, e) not yet looked at
-    int t = t0, z = lo[2], y = lo[1], x = lo[0] - 1;
-    uint32_t j = 0, e = 0;
-    for (;;) {
-      int hit = -1;
-      Vec<D> d;
-      float rr = 0.0f;
-      for (;;) {
-        if (j < e) {
-          const uint32_t q = j++;
-          d = xi - pos[q];
-          rr = norm2(d);
-          if (rr < r2) {
-            hit = int(q);
-            break;
-          }
-          continue;
-        }
-        // the next cell (x fastest, then y, z, tag)
-        if (++x > hi[0]) {
-          x = lo[0];
-          if (++y > hi[1]) {
-            y = lo[1];
-            if (++z > hi[2]) {
-              z = lo[2];
-              if (++t >= t1) break;
+    for (int t = t0; t < t1; ++t) {
+      const uint64_t tbase = uint64_t(t) * spec.ncells;
+      for (int z = lo[2]; z <= hi[2]; ++z) {
+        for (int y = lo[1]; y <= hi[1]; ++y) {
+          const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
+          for (int x = lo[0]; x <= hi[0]; ++x) {
+            const uint64_t slot = row + uint64_t(x);
+            uint32_t s = cell_start[slot];
+            const uint32_t e = cell_end[slot];
+            if (kPairs && s <= uint32_t(i)) s = uint32_t(i) + 1u;
+            for (uint32_t j = s; j < e; ++j) {
+              Vec<D> d = xi - pos[j];
+              float rr = norm2(d);
+              if (rr < r2) visit(int(j), d, rr);
             }
           }
         }
-        const uint64_t slot = uint64_t(t) * spec.ncells + uint64_t(z) * dxy + uint64_t(y) * dx + uint64_t(x);
-        j = cell_start[slot];
-        e = cell_end[slot];
-        if (kPairs && j <= uint32_t(i)) j = uint32_t(i) + 1u;
       }
-      if (hit < 0) return;
-      visit(hit, d, rr);
     }
   }
 };
