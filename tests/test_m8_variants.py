@@ -134,8 +134,8 @@ def test_list_build_is_checked_and_auto_scans_small_scenes():
         lists("octree")
     assert lists("cells").core.scalars()["list_scan"] == 0
     assert lists("scan").core.scalars()["list_scan"] == 1
-    assert lists("auto").core.scalars()["list_scan"] == 1  # 600 particles
-    assert lists("auto", particles=1600).core.scalars()["list_scan"] == 0
+    assert lists("auto", particles=400).core.scalars()["list_scan"] == 1
+    assert lists("auto").core.scalars()["list_scan"] == 0  # 600 particles
 
 
 def test_scan_and_cells_list_the_same_neighbours():

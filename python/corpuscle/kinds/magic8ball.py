@@ -79,7 +79,7 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
                     "8 from there; the CPU runs one)"),
     "sph.list_build": _K("enum", "auto", "", doc="how the neighbour lists are rebuilt: cells (the 27 cells around "
                          "each particle) or scan (every particle and ghost of its scene: cheaper for small scenes); "
-                         "auto: scan up to 1,500 particles a scene", choices=("auto", "cells", "scan")),
+                         "auto: scan up to 500 particles a scene", choices=("auto", "cells", "scan")),
     "sph.max_list_memory": _K("float", 0.0, "MB", 0.0, 1e9,
                               "most memory the neighbour lists may grow to when they overflow; 0: what the backend has free"),
     # gravity

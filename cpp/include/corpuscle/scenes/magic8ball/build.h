@@ -25,8 +25,10 @@ inline int auto_lanes(const Model& m) {
 }
 // how the lists are rebuilt when the scene does not say (sph.list_build = auto): a scan of the
 // whole scene for scenes of at most kScanSlots particle slots (where the 27 cells around a
-// particle hold most of its scene anyway), the cell walk for larger ones
-constexpr int kScanSlots = 1500;
+// particle hold most of its scene anyway), the cell walk for larger ones. At 4,096 scenes of
+// 1,000 particles the cells were faster on the H200 (87.7 against 82.7 steps/s, 2026-12-02):
+// the scan is kept for scenes of at most 500
+constexpr int kScanSlots = 500;
 inline int auto_list_scan(const Model& m) { return m.n_fluid <= kScanSlots ? 1 : 0; }
 
 inline Model build_model(const ParamSource& p) {
