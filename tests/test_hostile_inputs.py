@@ -108,6 +108,16 @@ def test_wind_tunnel_with_a_handful_of_particles_builds_without_warnings(n):
     assert (np.abs(pos[:, 0]) < L / 2).all() and (np.abs(pos[:, 1]) < H / 2).all()
 
 
+@pytest.mark.parametrize("kind,extra", [("wind-tunnel", ()), ("wind-tunnel", ("--set", "contact.enabled=false")),
+                                        ("wind-tunnel-3d", ())])
+def test_wind_tunnel_with_too_many_cells_names_the_keys(kind, extra):
+    # 2^31 - 1 particles: a contact grid of more than 2^31 cells; the error named no key
+    proc = run_cli("run", kind, "--set", "gas.particles=2147483647", *extra, "--backend", "serial", "--steps", 1,
+                   timeout=120)
+    assert_one_line_error(proc, "gas.particles=2147483647")
+    assert "grid.cell" in proc.stderr
+
+
 # --- the command line ----------------------------------------------------------------------
 
 @pytest.fixture(scope="module")

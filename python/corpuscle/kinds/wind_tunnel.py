@@ -357,6 +357,13 @@ class WindTunnel(Kind):
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
+        # the broad phase's cells (of at least a contact diameter) must be countable in 32 bits
+        edge = max(2.0 * radius, params["cell"])
+        cells = math.prod(math.ceil(float(e) / edge) for e in (hi - lo))
+        if cells >= 2**31:  # (the pipeline builds its grid also for a collisionless gas)
+            raise SceneError(f"{key_values(scene, ('gas.particles', 'gas.radius', 'grid.cell'))}: the contact grid "
+                             f"would need {cells:,} cells of {edge:.3g} m, more than 2,147,483,647 (fewer "
+                             f"particles, a larger gas.radius or grid.cell)")
         if params["collide"] and params["thermal"] == 0.0 and v["inflow.lattice"]:
             params.update(self._conveyor(n, radius, lo, hi, poly))
         check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius")),
