@@ -120,7 +120,7 @@ import numpy as np
 
 from .. import scene as _scene
 from .._errors import MemoryNeedError
-from ..scene import SceneKind
+from ..scene import SceneError, SceneKind
 
 __all__ = ["Kind", "Build", "Target", "register", "find", "get", "registry", "count", "finite_vector",
            "particle_array", "fmt_bytes", "check_memory", "key_values", "kind_method", "core"]
@@ -377,7 +377,10 @@ def key_values(scene, keys) -> str:
 def check_memory(kind: str, target: Target, params: dict, keys: str, detail: str) -> None:
     """Fail (:class:`MemoryNeedError`, naming ``keys`` and ``detail``) before allocating
     when a simulation with these parameters needs more memory than the backend has."""
-    need = float(core().bytes_needed(kind, target.index, params))
+    try:
+        need = float(core().bytes_needed(kind, target.index, params))
+    except ValueError as exc:  # a size the core cannot index (a grid of more than 2^31 cells, ...)
+        raise SceneError(f"{keys}: {exc}") from None
     have = float(core().bytes_available(target.backend, target.device))
     if have > 0 and need > have:
         where = "GPU memory free" if target.backend == "cuda" else "host memory available"

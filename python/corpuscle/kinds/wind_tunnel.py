@@ -357,16 +357,9 @@ class WindTunnel(Kind):
             "dt_max": float(v["timestep.dt_max"]), "quarter_chord": quarter.tolist(), "measure_start": t0,
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
-        # the broad phase's cells (of at least a contact diameter) must be countable in 32 bits
-        edge = max(2.0 * radius, params["cell"])
-        cells = math.prod(math.ceil(float(e) / edge) for e in (hi - lo))
-        if cells >= 2**31:  # (the pipeline builds its grid also for a collisionless gas)
-            raise SceneError(f"{key_values(scene, ('gas.particles', 'gas.radius', 'grid.cell'))}: the contact grid "
-                             f"would need {cells:,} cells of {edge:.3g} m, more than 2,147,483,647 (fewer "
-                             f"particles, a larger gas.radius or grid.cell)")
         if params["collide"] and params["thermal"] == 0.0 and v["inflow.lattice"]:
             params.update(self._conveyor(n, radius, lo, hi, poly))
-        check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius")),
+        check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius", "grid.cell")),
                      f"{n} particles")
         if len(poly) > 1024:
             raise SceneError(f"airfoil.shape: {len(poly)} vertices, at most 1024")
@@ -389,6 +382,17 @@ class WindTunnel(Kind):
         return Build(params, arrays, info)
 
     @staticmethod
+    def _start_spacing(n, radius, lo, hi, poly):
+        """The start lattice's extent (a radius off the walls; the whole periodic span in 3-D)
+        and spacing: n sites and 10% more over the free area (x-y, less the section) or volume."""
+        ext = hi - lo - 2 * radius
+        if len(lo) == 3:
+            ext[2] = hi[2] - lo[2]  # the periodic span: no wall to keep clear of
+        free = float(np.prod(ext[:2])) - abs(airfoils.signed_area(poly))
+        a = math.sqrt(free / (n * 1.1)) if len(lo) == 2 else (free * ext[2] / (n * 1.1)) ** (1 / 3)
+        return ext, a
+
+    @staticmethod
     def _place(n, radius, lo, hi, poly, params, seed):
         """A jittered square lattice over the channel, a radius clear of the walls and the
         airfoil, n of its sites drawn at random; velocities are the free stream. A
@@ -400,11 +404,7 @@ class WindTunnel(Kind):
         if params.get("conv_rows", 0):
             return WindTunnel._place_conveyor(n, radius, lo, hi, poly, params, rng)
         d = len(lo)
-        ext = hi - lo - 2 * radius
-        if d == 3:
-            ext[2] = hi[2] - lo[2]  # the periodic span: no wall to keep clear of
-        free = float(np.prod(ext[:2])) - abs(airfoils.signed_area(poly))
-        a = math.sqrt(free / (n * 1.1)) if d == 2 else (free * ext[2] / (n * 1.1)) ** (1 / 3)
+        ext, a = WindTunnel._start_spacing(n, radius, lo, hi, poly)
         if a <= 2 * radius * 1.0001:
             raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
                              f"(lattice spacing {a:.3g} m < a diameter)")
@@ -468,11 +468,7 @@ class WindTunnel(Kind):
         random numbers): a resumed run rebuilds the same one. More rows than the core holds
         (stages.h kMaxRows): no conveyor (re-entry at random heights)."""
         d = len(lo)
-        ext = hi - lo - 2 * radius
-        if d == 3:
-            ext[2] = hi[2] - lo[2]  # the periodic span: no wall to keep clear of
-        free = float(np.prod(ext[:2])) - abs(airfoils.signed_area(poly))
-        a = math.sqrt(free / (n * 1.1)) if d == 2 else (free * ext[2] / (n * 1.1)) ** (1 / 3)
+        ext, a = WindTunnel._start_spacing(n, radius, lo, hi, poly)
         while True:
             if a <= 2 * radius * 1.0001:
                 raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "

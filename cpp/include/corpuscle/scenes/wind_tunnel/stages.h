@@ -555,6 +555,13 @@ CPS_HD CPS_INLINE void accumulate_blocks(Scene<D>& G, const StepSums<D>& S, doub
   G.cur_t = G.cur_lift = G.cur_drag = G.cur_moment = 0.0;
 }
 
+// the free stream's speed this step: U (1 + the control's speed_scale), at which particles
+// re-enter and the inflow conveyor's slots move in
+template <int D>
+CPS_HD CPS_INLINE float stream_speed(const Model<D>& m, const Control& u) {
+  return m.speed * (1.0f + u.speed_scale);
+}
+
 // stage 3 (one item per scene): dt, the block averages, the clock
 template <int D>
 struct FinalizeStage {
@@ -588,7 +595,7 @@ struct FinalizeStage {
     // the forces of this step's state act over [time, time + dt]
     if (C.time >= m.measure_start) accumulate_blocks(G, S, double(dt));
     G.step_dt = dt;
-    G.inflow_x += double(m.speed) * double(1.0f + ctl->speed_scale) * double(dt);  // the conveyor's slots move in
+    G.inflow_x += double(stream_speed(m, *ctl)) * double(dt);  // the conveyor's slots move in
     advance_clock(C, dt, last);
   }
 };
@@ -607,7 +614,7 @@ struct FinalizeStage {
 template <int D>
 CPS_HD CPS_INLINE void reenter(const Model<D>& m, const Control& u, int id, long long step, float dt, float frac,
                                Vec<D>& x, Vec<D>& v) {
-  const float U = m.speed * (1.0f + u.speed_scale);
+  const float U = stream_speed(m, u);
   const float u1 = uniform01(m.seed, id, step, 1);
   const float u2 = uniform01(m.seed, id, step, 2), u3 = uniform01(m.seed, id, step, 3);
   const float span = m.hi[1] - m.lo[1] - 2.0f * m.radius;
@@ -744,7 +751,7 @@ struct ConveyorPlaceStage {
       g->conv_next[r] = int(c + 1);
       s.pos[i] = conveyor_slot(m, g->inflow_x, r, c);
       Vec<D> v = Vec<D>::zero();
-      v[0] = m.speed * (1.0f + ctl->speed_scale);
+      v[0] = stream_speed(m, *ctl);
       s.vel[i] = v;
       s.leaving[k] = -1;
     }
