@@ -132,6 +132,27 @@ def test_segmented_reduce_serial_equals_openmp_bitwise():
     assert a.tobytes() == b.tobytes()
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("n", [0, 1, 1000, 300001])
+@pytest.mark.parametrize("op", ["sum", "max"])
+def test_fused_reduce_equals_the_reduction_of_stored_items_and_runs_its_follow_up(backend, n, op):
+    # for_each_reduce_then: the items come from the stage function and are never stored
+    rng = np.random.default_rng(n + 17)
+    items = rng.normal(size=n).astype(np.float32)
+    init = {"sum": 0.0, "max": -np.inf}[op]  # op's identity (every thread and chunk starts from it)
+    fused, twice, stored = T.fused_reduce(backend, items, op, init)
+    assert twice == np.float32(2.0) * fused  # the follow-up read the result
+    if op == "max":
+        assert fused == (np.float32(init) if n == 0 else max(np.float32(init), items.max()))
+    elif backend == "cuda":  # blocks' trees, not left to right: rounding only; the same every run
+        np.testing.assert_allclose(fused, init + np.sum(items, dtype=np.float64), rtol=1e-5, atol=1e-3)
+        again = T.fused_reduce(backend, items, op, init)
+        assert again.tobytes() == np.array([fused, twice, stored], np.float32).tobytes()
+    else:  # the CPU's chunks and order: bit for bit the reduction of the stored items
+        assert np.float32(fused).tobytes() == np.float32(stored).tobytes()
+        np.testing.assert_allclose(fused, init + np.sum(items, dtype=np.float64), rtol=1e-5, atol=1e-3)
+
+
 # --------------------------------------------------------------------------------------
 # 64-bit key sort
 # --------------------------------------------------------------------------------------

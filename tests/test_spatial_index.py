@@ -290,6 +290,29 @@ def test_grid_keys_hold_tag_above_morton_cell_and_sort_stably_with_unused_slots_
     assert np.all(np.diff(ktags.astype(np.int64)) >= 0)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("width", ["narrow", "wide"])
+def test_grid_keys_sort_the_same_stored_in_32_or_64_bits(backend, width):
+    # keys of at most 32 bits are sorted as 32-bit words, wider ones as 64-bit: both give the
+    # reference keys (tag above the Morton cell, unused slots as the sentinel) in stable order
+    rng = np.random.default_rng(11)
+    n = 4000
+    hi = [1.0, 1.0, 1.0] if width == "narrow" else [3000.0, 1.0, 1.0]  # 3,000 cells along x: 12 bits an axis
+    radius = 0.05 if width == "narrow" else 1.0
+    pos = (rng.uniform(-0.1, 1.1, (n, 3)) * np.array(hi)).astype(np.float32)
+    pos[:700] = pos[700:1400]
+    tags = rng.integers(-1, 3, n).astype(np.int32)
+    spec = T.cell_grid_spec(3, [0.0] * 3, hi, radius, ntags=3)
+    assert (spec["key_bits"] <= 32) == (width == "narrow")
+    keys, order = T.grid_sort(backend, pos, radius, [0.0] * 3, hi, tags=tags, ntags=3)
+    cell = np.floor(pos.astype(np.float64) * (1.0 / spec["cell"]))
+    cell = np.clip(cell, 0, np.array(spec["dims"]) - 1).astype(np.int32)
+    ref = T.morton_encode(cell, True) | (tags.astype(np.uint64) << np.uint64(spec["tag_shift"]))
+    ref[tags < 0] = np.uint64(spec["sentinel"])
+    np.testing.assert_array_equal(order, np.argsort(ref, kind="stable"))
+    np.testing.assert_array_equal(keys, ref[order])
+
+
 # --------------------------------------------------------------------------------------
 # every index finds what brute force finds
 # --------------------------------------------------------------------------------------

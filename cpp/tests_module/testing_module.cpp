@@ -318,6 +318,12 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("backend"), nb::arg("items"), nb::arg("offsets"), nb::arg("op"), nb::arg("init"));
   m.def(
+      "fused_reduce",
+      [](const std::string& backend, const Array& items, const std::string& op, double init) {
+        return np(prim_ops(backend)->fused_reduce(vec<float>(items, "items"), reduce_op(op), float(init)));
+      },
+      nb::arg("backend"), nb::arg("items"), nb::arg("op"), nb::arg("init"));
+  m.def(
       "sort_pairs64",
       [](const std::string& backend, const Array& keys, const Array& values, int bits) {
         std::vector<uint64_t> ko;

@@ -45,6 +45,9 @@ struct PrimOps {
                                          int init) = 0;
   virtual void sort_pairs64(const std::vector<uint64_t>& keys, const std::vector<int>& values, int bits,
                             std::vector<uint64_t>& kout, std::vector<int>& vout) = 0;
+  // for_each_reduce_then over items[i] (returned by the item function) with op, and reduce over
+  // the same stored items: {fused, the fused stage's follow-up (2 x fused), stored}
+  virtual std::vector<float> fused_reduce(const std::vector<float>& items, int op, float init) = 0;
   virtual std::vector<float> tile_exercise(const std::vector<float>& x, int tile) = 0;
   virtual std::vector<int> for_each_if(int flag, int n) = 0;
   virtual AtomicsResult atomics(const std::vector<int>& v) = 0;
@@ -106,6 +109,15 @@ struct MinOp {
 struct MaxOp {
   template <class T>
   CPS_HD T operator()(const T& a, const T& b) const { return a < b ? b : a; }
+};
+// the item function of a fused reduction, and a follow-up that reads its result
+struct ItemOf {
+  const float* p;
+  CPS_HD float operator()(int i) const { return p[i]; }
+};
+struct TwiceOf {
+  float* out;
+  CPS_HD void operator()(int) const { out[1] = 2.0f * out[0]; }
 };
 
 // a tile program that needs its syncs: stage the tile's values in shared memory, read other
@@ -337,6 +349,22 @@ struct PrimOpsImpl final : PrimOps, Driver<Exec> {
     ex.sort_pairs(dk.data(), dko.data(), dv.data(), dvo.data(), n, bits);
     kout = this->download(dko.data(), size_t(n));
     vout = this->download(dvo.data(), size_t(n));
+  }
+
+  std::vector<float> fused_reduce(const std::vector<float>& items, int op, float init) override {
+    const int n = int(items.size());
+    auto d = this->upload(items);
+    auto out = this->template alloc<float>(3);
+    const float* p = d.data();
+    float* o = out.data();
+    auto run = [&](auto opf) {
+      ex.for_each_reduce_then(n, ItemOf{p}, o, opf, init, TwiceOf{o});
+      ex.reduce(p, n, o + 2, opf, init);
+    };
+    if (op == kSum) run(SumOp{});
+    else if (op == kMin) run(MinOp{});
+    else run(MaxOp{});
+    return this->download(o, 3);
   }
 
   std::vector<float> tile_exercise(const std::vector<float>& x, int tile) override {
@@ -657,7 +685,7 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
     auto tags = this->upload(q.tags);
     CellGrid<D, Exec> grid(spec_of<D>(q, q.radius));
     grid.sort(ex, pos.data(), q.tags.empty() ? nullptr : tags.data(), n);
-    keys = this->download(grid.sorted_keys(), size_t(n));
+    keys = grid.sorted_keys_host(ex);
     order = this->download(grid.order(), size_t(n));
   }
 };

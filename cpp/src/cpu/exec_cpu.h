@@ -171,6 +171,25 @@ struct CpuExec {
     *out = acc;
   }
 
+  // f(i) returns item i's T; op over the n items from init (op's identity) into *out, then fin(0):
+  // the same chunks and order as reduce() over stored items (so the same result, bit for
+  // bit), without storing them
+  template <class F, class T, class Op, class Fin>
+  void for_each_reduce_then(int n, const F& f, T* out, Op op, T init, const Fin& fin) const {
+    T part[kReduceChunks];
+    const int chunk = (n + kReduceChunks - 1) / kReduceChunks;
+    for_each(kReduceChunks, [&](int c) {
+      T acc = init;
+      const int b = c * chunk, e = std::min(n, b + chunk);
+      for (int i = b; i < e; ++i) acc = op(acc, f(i));
+      part[c] = acc;
+    });
+    T acc = init;
+    for (int c = 0; c < kReduceChunks; ++c) acc = op(acc, part[c]);
+    *out = acc;
+    fin(0);
+  }
+
   // reduce, then run a one-item stage that reads the result
   template <class T, class Op, class F>
   void reduce_then(const T* in, int n, T* out, Op op, T init, const F& f) const {

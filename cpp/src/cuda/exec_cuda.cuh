@@ -7,6 +7,7 @@
 #include <cuda_runtime.h>
 #include <thrust/iterator/counting_iterator.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstddef>
 #include <cub/cub.cuh>
@@ -86,6 +87,33 @@ __global__ void __launch_bounds__(kThreads) k_for_each_warp_reduce_then(int n, F
   if (!last) return;
   __threadfence();
   block_reduce_then<T, Op, Fin, kThreads>(items, n, out, op, init, fin);
+  if (threadIdx.x == 0) *counter = 0u;  // ready for the next launch
+}
+
+// f(i) returns item i (a T); a fixed grid of blocks strides over [0, n) (thread t takes t,
+// t + stride, ... in order), each block reduces its threads' sums in CUB's fixed tree into
+// partials[block], and the last block to finish reduces the partials in a fixed order into
+// *out and runs fin on it: the items are never stored, and the result depends on n and the
+// grid only (the same on every run of one device)
+template <class F, class T, class Op, class Fin, int kThreads>
+__global__ void __launch_bounds__(kThreads) k_for_each_reduce_then(int n, F f, T* partials, T* out, Op op, T init,
+                                                                   Fin fin, unsigned* counter) {
+  using BlockReduce = cub::BlockReduce<T, kThreads>;
+  __shared__ typename BlockReduce::TempStorage tmp;
+  __shared__ bool last;
+  T acc = init;
+  const int stride = int(gridDim.x) * kThreads;
+  for (int i = int(blockIdx.x) * kThreads + int(threadIdx.x); i < n; i += stride) acc = op(acc, f(i));
+  const T r = BlockReduce(tmp).Reduce(acc, op);
+  if (threadIdx.x == 0) {
+    partials[blockIdx.x] = r;
+    __threadfence();
+    last = atomicAdd(counter, 1u) == gridDim.x - 1u;
+  }
+  __syncthreads();
+  if (!last) return;
+  __threadfence();
+  block_reduce_then<T, Op, Fin, kThreads>(partials, int(gridDim.x), out, op, init, fin);
   if (threadIdx.x == 0) *counter = 0u;  // ready for the next launch
 }
 
@@ -358,13 +386,39 @@ struct CudaExec {
       reduce_then(items, n, out, op, init, fin);
       return;
     }
-    if (!counter_) {
-      CPS_CUDA_CHECK(cudaMalloc(&counter_, sizeof(unsigned)));
-      CPS_CUDA_CHECK(cudaMemset(counter_, 0, sizeof(unsigned)));
-    }
+    ensure_counter();
     long long threads = 32LL * n;
     k_for_each_warp_reduce_then<F, T, Op, Fin, kBlock>
         <<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f, items, out, op, init, fin, counter_);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // f(i) returns item i's T for i in [0, n); op over the items from init (op's identity) into *out, then
+  // fin(0), in one kernel that never stores the items (k_for_each_reduce_then): as many
+  // blocks as the device holds at once, so the last block's reduction of their partials is short
+  static constexpr int kFusedThreads = 256;
+  template <class F, class T, class Op, class Fin>
+  void for_each_reduce_then(int n, const F& f, T* out, Op op, T init, const Fin& fin) {
+    activate();
+    using K = decltype(&k_for_each_reduce_then<F, T, Op, Fin, kFusedThreads>);
+    const K kernel = &k_for_each_reduce_then<F, T, Op, Fin, kFusedThreads>;
+    // resident blocks per multiprocessor, once per kernel and device (not a stream operation:
+    // allowed while a graph is captured)
+    static std::atomic<int> resident[kMaxDevices] = {};
+    const int d = device_ >= 0 && device_ < kMaxDevices ? device_ : 0;
+    int per_sm = resident[d].load();
+    if (per_sm <= 0) {
+      CPS_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, kernel, kFusedThreads, 0));
+      if (per_sm < 1) per_sm = 1;
+      resident[d].store(per_sm);
+    }
+    long long blocks = (std::max(n, 1) + kFusedThreads - 1) / kFusedThreads;
+    const long long cap = (long long)per_sm * (sms_ > 0 ? sms_ : 1);
+    if (blocks > cap) blocks = cap;
+    ensure_temp(size_t(blocks) * sizeof(T));
+    ensure_counter();
+    kernel<<<unsigned(blocks), kFusedThreads, 0, stream_>>>(n, f, static_cast<T*>(temp_), out, op, init, fin,
+                                                            counter_);
     CPS_CUDA_LAUNCH_CHECK();
   }
 
@@ -694,6 +748,13 @@ struct CudaExec {
     int d = 0;
     CPS_CUDA_CHECK(cudaGetDevice(&d));
     return d;
+  }
+
+  // the last-block counter of the fused kernels (zero between launches)
+  void ensure_counter() {
+    if (counter_) return;
+    CPS_CUDA_CHECK(cudaMalloc(&counter_, sizeof(unsigned)));
+    CPS_CUDA_CHECK(cudaMemset(counter_, 0, sizeof(unsigned)));
   }
 
   void ensure_temp(size_t bytes) {

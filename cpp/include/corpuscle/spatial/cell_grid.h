@@ -18,6 +18,11 @@
 // rounding, so the error does not grow with the coordinate), and the cell edge is the
 // radius plus 1e-6 of it, which covers the float rounding of the distance check itself.
 //
+// Keys of at most 32 bits (a grid of up to 2^32 / 2^tag_bits cells: 2M cells of one tag need
+// 23) are sorted as 32-bit words: the radix sort moves a third less memory per pass than with
+// 64-bit keys (the wind tunnel's sort at 2M particles is a third of its step). The view reads
+// either width through key(); the 32-bit sentinel is all ones, as the 64-bit one.
+//
 // Build: sort (keys, stable sort; order() maps sorted slot -> input slot), reorder (the
 // caller's arrays, or the grid's own copy of the positions), mark (cell ranges from the
 // sorted keys). The view (CellGridView) follows the protocol of spatial/index.h; its slot
@@ -27,6 +32,7 @@
 #include <cstddef>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 #include "corpuscle/core/error.h"
 #include "corpuscle/spatial/index.h"
@@ -59,6 +65,8 @@ struct CellGridSpec {
   int key_bits = 0;      // key bits the sort looks at
 
   CPS_HD int tag_shift() const { return D * bits; }
+  // the keys fit a 32-bit word (and the 32-bit sentinel, all ones, stays above every real key)
+  CPS_HD bool narrow() const { return key_bits <= 32; }
   CPS_HD uint64_t table_size() const { return uint64_t(ntags) * ncells; }
 
   // integer cell of a position, clamped into the grid (NaN: cell 0)
@@ -156,7 +164,8 @@ struct CellGridView {
   static constexpr int kDim = D;
   CellGridSpec<D> spec;
   const Vec<D>* pos = nullptr;           // positions in sorted order
-  const uint64_t* keys = nullptr;        // sorted keys (kSentinel: unused slot)
+  const uint64_t* keys = nullptr;        // sorted keys (kSentinel: unused slot), 64-bit ...
+  const uint32_t* keys32 = nullptr;      // ... or 32-bit (spec.narrow(); all ones: unused)
   const uint32_t* cell_start = nullptr;  // spec.table_size() entries each
   const uint32_t* cell_end = nullptr;
   int n = 0;                             // slots
@@ -165,7 +174,15 @@ struct CellGridView {
   bool own_tag = false;                  // ... or only the tag of slot i (scenes of a batch)
 
   CPS_HD int size() const { return n; }
-  CPS_HD bool active(int i) const { return keys[i] != CellGridSpec<D>::kSentinel; }
+  // the sorted key of slot i, whatever width it is stored in
+  CPS_HD uint64_t key(int i) const {
+    if (keys32) {
+      const uint32_t k = keys32[i];
+      return k == ~uint32_t(0) ? CellGridSpec<D>::kSentinel : uint64_t(k);
+    }
+    return keys[i];
+  }
+  CPS_HD bool active(int i) const { return key(i) != CellGridSpec<D>::kSentinel; }
   CPS_HD const Vec<D>& position(int i) const { return pos[i]; }
   CPS_HD float max_radius() const { return spec.radius; }
   CPS_HD CellGridView with_radius(float r) const {
@@ -238,7 +255,7 @@ struct CellGridView {
     }
     int t0 = tag_begin, t1 = tag_end;
     if (own_tag) {
-      t0 = spec.tag_of_key(keys[i]);
+      t0 = spec.tag_of_key(key(i));
       t1 = t0 + 1;
     }
     const uint64_t dx = uint64_t(spec.dims[0]);
@@ -267,15 +284,16 @@ struct CellGridView {
 
 // ---- build stages (one thread per slot) ----
 
-template <int D>
+// (K: uint64_t, or uint32_t for narrow keys: the 64-bit key's low word, the sentinel all ones)
+template <int D, class K>
 struct CellKeysFn {
   CellGridSpec<D> spec;
   const Vec<D>* pos;
   const int* tags;  // null: every slot has tag 0
-  uint64_t* keys;
+  K* keys;
   int* ids;
   CPS_HD void operator()(int i) const {
-    keys[i] = spec.key(pos[i], tags ? tags[i] : 0);
+    keys[i] = K(spec.key(pos[i], tags ? tags[i] : 0));
     ids[i] = i;
   }
 };
@@ -283,17 +301,17 @@ struct CellKeysFn {
 // the keys of a sort that keeps the order unless *rebuild: a slot not rekeyed keeps the key the
 // last sort gave it (those are sorted, so the stable sort leaves every slot where it is and the
 // cell ranges come out as they were)
-template <int D>
+template <int D, class K>
 struct CellKeysIfFn {
   CellGridSpec<D> spec;
   const Vec<D>* pos;
   const int* tags;
-  const uint64_t* last;  // the last sort's sorted keys
+  const K* last;  // the last sort's sorted keys
   const int* rebuild;
-  uint64_t* keys;
+  K* keys;
   int* ids;
   CPS_HD void operator()(int i) const {
-    keys[i] = *rebuild ? spec.key(pos[i], tags ? tags[i] : 0) : last[i];
+    keys[i] = *rebuild ? K(spec.key(pos[i], tags ? tags[i] : 0)) : last[i];
     ids[i] = i;
   }
 };
@@ -307,17 +325,17 @@ struct ReorderFn {
 };
 
 // record the cell range of sorted slot j (tables zeroed beforehand)
-template <int D>
+template <int D, class K>
 struct CellMarkFn {
   CellGridSpec<D> spec;
-  const uint64_t* keys;
+  const K* keys;
   int n;
   uint32_t* start;
   uint32_t* end;
   CPS_HD void operator()(int j) const {
-    const uint64_t k = keys[j];
-    if (k == CellGridSpec<D>::kSentinel) return;
-    const uint64_t slot = spec.slot_of_key(k);
+    const K k = keys[j];
+    if (k == K(CellGridSpec<D>::kSentinel)) return;
+    const uint64_t slot = spec.slot_of_key(uint64_t(k));
     if (j == 0 || keys[j - 1] != k) start[slot] = uint32_t(j);
     if (j == n - 1 || keys[j + 1] != k) end[slot] = uint32_t(j + 1);
   }
@@ -338,12 +356,19 @@ class CellGrid {
   //    slot), then stable-sort the keys
   void sort(Exec& ex, const Vec<D>* pos, const int* tags, int n) {
     n_ = n;
-    grow(ex, keys_, n);
-    grow(ex, keys_sorted_, n);
     grow(ex, ids_, n);
     grow(ex, order_, n);
-    ex.for_each(n, CellKeysFn<D>{spec_, pos, tags, keys_.data(), ids_.data()});
-    ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+    if (spec_.narrow()) {
+      grow(ex, keys32_, n);
+      grow(ex, keys32_sorted_, n);
+      ex.for_each(n, CellKeysFn<D, uint32_t>{spec_, pos, tags, keys32_.data(), ids_.data()});
+      ex.sort_pairs(keys32_.data(), keys32_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+    } else {
+      grow(ex, keys_, n);
+      grow(ex, keys_sorted_, n);
+      ex.for_each(n, CellKeysFn<D, uint64_t>{spec_, pos, tags, keys_.data(), ids_.data()});
+      ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+    }
     sorted_ = true;
   }
   // 1'. the same when *rebuild != 0 (read on the device); otherwise every slot keeps its last
@@ -353,8 +378,15 @@ class CellGrid {
       sort(ex, pos, tags, n);
       return;
     }
-    ex.for_each(n, CellKeysIfFn<D>{spec_, pos, tags, keys_sorted_.data(), rebuild, keys_.data(), ids_.data()});
-    ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+    if (spec_.narrow()) {
+      ex.for_each(n, CellKeysIfFn<D, uint32_t>{spec_, pos, tags, keys32_sorted_.data(), rebuild, keys32_.data(),
+                                               ids_.data()});
+      ex.sort_pairs(keys32_.data(), keys32_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+    } else {
+      ex.for_each(n, CellKeysIfFn<D, uint64_t>{spec_, pos, tags, keys_sorted_.data(), rebuild, keys_.data(),
+                                               ids_.data()});
+      ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
+    }
   }
   // 2. out[j] = in[order()[j]]: an array in sorted order (in and out distinct)
   template <class T>
@@ -370,7 +402,10 @@ class CellGrid {
     }
     ex.zero(start_.data(), entries * sizeof(uint32_t));
     ex.zero(end_.data(), entries * sizeof(uint32_t));
-    ex.for_each(n_, CellMarkFn<D>{spec_, keys_sorted_.data(), n_, start_.data(), end_.data()});
+    if (spec_.narrow())
+      ex.for_each(n_, CellMarkFn<D, uint32_t>{spec_, keys32_sorted_.data(), n_, start_.data(), end_.data()});
+    else
+      ex.for_each(n_, CellMarkFn<D, uint64_t>{spec_, keys_sorted_.data(), n_, start_.data(), end_.data()});
   }
   // all three, keeping a sorted copy of the positions for view()
   void build(Exec& ex, const Vec<D>* pos, const int* tags, int n) {
@@ -385,7 +420,8 @@ class CellGrid {
     CellGridView<D> v;
     v.spec = spec_;
     v.pos = sorted_pos;
-    v.keys = keys_sorted_.data();
+    if (spec_.narrow()) v.keys32 = keys32_sorted_.data();
+    else v.keys = keys_sorted_.data();
     v.cell_start = start_.data();
     v.cell_end = end_.data();
     v.n = n_;
@@ -399,7 +435,19 @@ class CellGrid {
 
   int size() const { return n_; }
   const int* order() const { return order_.data(); }             // sorted slot -> input slot
-  const uint64_t* sorted_keys() const { return keys_sorted_.data(); }
+  // the sorted keys as 64-bit values on the host (the sentinel as kSentinel), for tests
+  std::vector<uint64_t> sorted_keys_host(Exec& ex) const {
+    std::vector<uint64_t> out(size_t(n_ > 0 ? n_ : 0));
+    if (n_ <= 0) return out;
+    if (spec_.narrow()) {
+      std::vector<uint32_t> k(out.size());
+      ex.to_host(k.data(), keys32_sorted_.data(), k.size() * sizeof(uint32_t));
+      for (size_t i = 0; i < k.size(); ++i) out[i] = k[i] == ~uint32_t(0) ? CellGridSpec<D>::kSentinel : k[i];
+    } else {
+      ex.to_host(out.data(), keys_sorted_.data(), out.size() * sizeof(uint64_t));
+    }
+    return out;
+  }
   const Vec<D>* sorted_positions() const { return sorted_pos_.data(); }
   uint64_t table_entries() const { return spec_.table_size(); }
 
@@ -412,7 +460,8 @@ class CellGrid {
   CellGridSpec<D> spec_;
   int n_ = 0;
   bool sorted_ = false;  // a sort has keyed every slot (sort_if may keep those keys)
-  Buffer<uint64_t> keys_, keys_sorted_;
+  Buffer<uint64_t> keys_, keys_sorted_;      // 64-bit keys ...
+  Buffer<uint32_t> keys32_, keys32_sorted_;  // ... or 32-bit ones (spec_.narrow())
   Buffer<int> ids_, order_;
   Buffer<Vec<D>> sorted_pos_;
   Buffer<uint32_t> start_, end_;

@@ -30,7 +30,7 @@ struct ChunkFlagFn {
       flags[j] = 0;
       return;
     }
-    const uint32_t s = grid.cell_start[grid.spec.slot_of_key(grid.keys[j])];
+    const uint32_t s = grid.cell_start[grid.spec.slot_of_key(grid.key(j))];
     flags[j] = (uint32_t(j) - s) % uint32_t(K) == 0u ? 1 : 0;
   }
 };
@@ -50,7 +50,7 @@ struct CompactGridView {
   // the chunk's slots [s, e) (c < *nchunks)
   CPS_HD void chunk(int c, int& s, int& e) const {
     s = chunk_start[c];
-    const uint32_t ce = grid.cell_end[grid.spec.slot_of_key(grid.keys[s])];
+    const uint32_t ce = grid.cell_end[grid.spec.slot_of_key(grid.key(s))];
     e = int(ce) < s + K ? int(ce) : s + K;
   }
 };
@@ -89,7 +89,7 @@ struct CompactTiledGatherFn {
     const uint64_t dx = uint64_t(g.spec.dims[0]);
     const uint64_t dxy = D == 3 ? dx * uint64_t(g.spec.dims[1]) : 0;
     int t1 = g.tag_end;
-    if (view.split >= 0 && g.spec.tag_of_key(g.keys[s0]) >= view.split) t1 = view.split < t1 ? view.split : t1;
+    if (view.split >= 0 && g.spec.tag_of_key(g.key(s0)) >= view.split) t1 = view.split < t1 ? view.split : t1;
     for (int tag = g.tag_begin; tag < t1; ++tag) {
       const uint64_t tbase = uint64_t(tag) * g.spec.ncells;
       for (int z = lo[2]; z <= hi[2]; ++z) {

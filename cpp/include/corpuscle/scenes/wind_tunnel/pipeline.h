@@ -3,8 +3,9 @@
 //
 // A step: the D-dimensional cell grid keys the current positions and sorts them (CellGrid<D, Exec>),
 // the particle arrays are gathered into cell order in the other buffers, the cell ranges
-// marked; then the contact forces by gather, the reductions and the per-scene finalize
-// (dt, block averages, clock), and the integration (with recycling) in place. The sorted
+// marked; then the contact forces by gather with the reductions and the per-scene finalize
+// (dt, block averages, clock) fused into the same pass (the LBVH's walks: reduced after), and
+// the integration (with recycling and the inflow conveyor) in place. The sorted
 // buffers are current afterwards. Index plug-ins: the grid, the LBVH and all pairs. D = 2 is
 // `wind-tunnel`, D = 3 `wind-tunnel-3d` (model.h).
 #pragma once
@@ -163,7 +164,9 @@ class Pipeline {
     }
     ex_.mark(2);
     Arrays s = arrays(nxt, cur);
-    // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest)
+    // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest), and
+    // 3. the step's sums with the per-scene update (dt, block averages, clock): fused into the
+    // contact pass (Exec::for_each_reduce_then) but for the tree, whose walks need shared memory
     auto contacts = [&](const auto& view) {
       using V = std::decay_t<decltype(view)>;
       // the tree's walks keep their stacks in shared memory on the device (spatial/lbvh.h)
@@ -175,7 +178,23 @@ class Pipeline {
         ex_.for_each(n, ZeroContactsStage<D>{s});
         walking(PairStage<D, V>{md, g, s, view});
       }
-      walking(ForceStage<D, V>{md, g, u_, s, view, grid_.spec()});
+      const ForceStage<D, V> force{md, g, u_, s, view, grid_.spec()};
+      if constexpr (kTree) {
+        walking(force);
+        ex_.mark(3);
+        if (integrate) ex_.reduce_then(s.items, n, &g->pending, SumsOp<D>{}, StepSums::identity(), FinalizeStage<D>{md, g, u_});
+        else ex_.reduce(s.items, n, &g->sums, SumsOp<D>{}, StepSums::identity());
+      } else {
+        // the forces and the step's sums in one pass: the sums items are never stored
+        if (integrate)
+          ex_.for_each_reduce_then(n, EvalOf<ForceStage<D, V>>{force}, &g->pending, SumsOp<D>{}, StepSums::identity(),
+                                   FinalizeStage<D>{md, g, u_});
+        else
+          ex_.for_each_reduce_then(n, EvalOf<ForceStage<D, V>>{force}, &g->sums, SumsOp<D>{}, StepSums::identity(),
+                                   NoFinalize{});
+        ex_.mark(3);
+      }
+      ex_.mark(4);
     };
     if constexpr (Index::kGrid) {
       contacts(grid_.view(s.pos).with_radius(2.0f * m_.radius));  // the contact reach, whatever the cell
@@ -185,23 +204,13 @@ class Pipeline {
       const float reach = 2.0f * m_.radius;
       contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});
     }
-    ex_.mark(3);
     if (integrate) {
-      // 3. the reductions and the per-scene update
-      ex_.reduce_then(s.items, n, &g->pending, SumsOp<D>{}, StepSums::identity(), FinalizeStage<D>{md, g, u_});
-      ex_.mark(4);
       // 4. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n, IntegrateStage<D>{md, g, u_, s});
       // the cold beam's leaving particles onto the inflow conveyor's free slots
-      if (m_.conv_rows > 0)
-        for (int attempt = 0; attempt < kConveyorAttempts; ++attempt) {
-          if (attempt > 0) ex_.for_each(kConveyorThreads, ConveyorClaimStage<D>{md, g, s, attempt});
-          ex_.for_each(kConveyorThreads, ConveyorPlaceStage<D>{md, g, u_, s, attempt});
-        }
+      // (one launch: the passes are separated by the block's barrier)
+      if (m_.conv_rows > 0) ex_.template for_each_tile<kConveyorThreads>(1, ConveyorStage<D>{md, g, u_, s});
       ex_.mark(5);
-    } else {
-      ex_.reduce(s.items, n, &g->sums, SumsOp<D>{}, StepSums::identity());
-      ex_.mark(4);
     }
   }
 

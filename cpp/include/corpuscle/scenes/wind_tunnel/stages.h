@@ -469,8 +469,11 @@ struct ForceStage {
   Arrays<D> s;
   View grid;
   CellGridSpec<D> spec;  // the cells the number density counts in
-  CPS_HD void operator()(int i) const {
-    if (halted(g)) return;  // the reduction of a step not taken is discarded
+  // the stage storing its sums item (the reduction reads it after)
+  CPS_HD void operator()(int i) const { s.items[i] = eval(i); }
+  // the stage, returning its sums item (Exec::for_each_reduce_then: never stored)
+  CPS_HD StepSums<D> eval(int i) const {
+    if (halted(g)) return StepSums<D>::identity();  // the reduction of a step not taken is discarded
     const Model<D>& m = *model;
     const Vec<D> x = s.pos[i], v = s.vel[i];
     Vec<D> F = Vec<D>::zero();
@@ -524,8 +527,20 @@ struct ForceStage {
     s.force[i] = F;
     s.pressure[i] = pressure;
     s.contacts[i] = contacts;
-    s.items[i] = it;
+    return it;
   }
+};
+
+// ForceStage as the item function of a fused reduction
+template <class Stage>
+struct EvalOf {
+  Stage stage;
+  CPS_HD auto operator()(int i) const { return stage.eval(i); }
+};
+
+// no per-scene update after a reduction (a state evaluated, not stepped)
+struct NoFinalize {
+  CPS_HD void operator()(int) const {}
 };
 
 // the block averages: add this step's airfoil force over dt; a full block is closed, and
@@ -754,6 +769,28 @@ struct ConveyorPlaceStage {
       v[0] = stream_speed(m, *ctl);
       s.vel[i] = v;
       s.leaving[k] = -1;
+    }
+  }
+};
+
+// the conveyor's passes in one tile of kConveyorThreads lanes (one CUDA block, its barrier
+// between the passes): attempt 0's placing (its claims were made by the integration), then
+// for each later attempt the claims and the placing
+template <int D>
+struct ConveyorStage {
+  const Model<D>* model;
+  Scene<D>* g;
+  const Control* ctl;
+  Arrays<D> s;
+  template <class Tile>
+  CPS_HD void operator()(int, Tile& tile) const {
+    for (int attempt = 0; attempt < kConveyorAttempts; ++attempt) {
+      if (attempt > 0) {
+        tile.lanes([&](int t) { ConveyorClaimStage<D>{model, g, s, attempt}(t); });
+        tile.sync();
+      }
+      tile.lanes([&](int t) { ConveyorPlaceStage<D>{model, g, ctl, s, attempt}(t); });
+      tile.sync();
     }
   }
 };
