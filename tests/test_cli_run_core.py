@@ -91,3 +91,19 @@ def test_run_time_ends_exactly_at_the_time(tmp_path, every):
         assert dts[-1] == np.float32(0.05 - times[-2])
         assert dts[-1] < dts[-2]
         assert times[-2] + dts[-2] > 0.05  # a full step from t_before would have passed T
+
+
+@pytest.mark.parametrize("argv", [["run", "magic8ball", "--backend", "cpu", "--device", "1", "--steps", "2"],
+                                  ["bench", "magic8ball", "--backend", "serial", "--device", "3", "--steps", "2"]])
+def test_device_on_a_cpu_backend_is_a_one_line_error(argv, tmp_path, capsys, monkeypatch):
+    # --device selects a CUDA device: on a CPU backend it would select nothing, silently
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--device" in err[0] and "CUDA" in err[0], err
+    assert not list(tmp_path.glob("*.cps"))
+
+
+def test_device_on_a_cpu_backend_is_refused_by_the_python_api():
+    with pytest.raises(ValueError, match="device 2"):
+        corpuscle.Simulation.from_scene("magic8ball", backend="serial", particles=500, device=2)

@@ -174,6 +174,9 @@ class Batch:
         if self.neighbors not in kinds["magic8ball"]:
             raise ValueError(f"--neighbors must be one of {', '.join(kinds['magic8ball'])}, got {self.neighbors!r}")
         self.device = _count("device", device)
+        if self.device and self.backend != "cuda":
+            raise ValueError(f"--device {self.device}: selects a CUDA device; the {self.backend} backend has none "
+                             "(leave --device out, or use --backend cuda)")
         target = Target(self.backend, self.neighbors, self.device)
         # the shared smoothing length: that of the smallest particle count
         n_min, n_max = int(counts.min()), int(counts.max())

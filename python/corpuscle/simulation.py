@@ -150,6 +150,9 @@ class Simulation:
         if self.neighbors not in kinds[scene.kind]:
             raise ValueError(f"--neighbors must be one of {', '.join(kinds[scene.kind])}, got {self.neighbors!r}")
         self.device = _count("device", device)
+        if self.device and self.backend != "cuda":
+            raise ValueError(f"--device {self.device}: selects a CUDA device; the {self.backend} backend has none "
+                             "(leave --device out, or use --backend cuda)")
         t0 = _time.perf_counter()
         built = kind.build(scene, Target(self.backend, self.neighbors, self.device), checkpoint)
         #: the core's parameters (as the kind built them)
