@@ -119,6 +119,11 @@ struct CpuExec {
     for_each_lanes(n, f);
   }
 
+  template <int W, int kMinBlocks, class F>
+  void for_each_lanes_w_bounded(int n, const F& f) const {
+    for_each_lanes(n, f);
+  }
+
   // for_each_lanes, then reduce_then
   template <class F, class T, class Op, class Fin>
   void for_each_lanes_reduce_then(int n, const F& f, const T* items, T* out, Op op, T init, const Fin& fin) const {

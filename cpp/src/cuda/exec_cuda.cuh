@@ -51,6 +51,14 @@ __global__ void k_for_each_lanes_w(int n, F f) {
   if (i < n) f(i, SubWarpLanes<W>{});
 }
 
+// the same with launch bounds (kThreads a block, at least kMinBlocks blocks per multiprocessor)
+template <int W, int kThreads, int kMinBlocks, class F>
+__global__ void __launch_bounds__(kThreads, kMinBlocks) k_for_each_lanes_w_bounded(int n, F f) {
+  long long t = (long long)blockIdx.x * blockDim.x + threadIdx.x;
+  int i = int(t / W);
+  if (i < n) f(i, SubWarpLanes<W>{});
+}
+
 // reduce in[0, n) in one block (fixed striding and tree, so the same on every run); thread
 // 0 writes *out and runs f(0) on it
 template <class T, class Op, class F, int kThreads>
@@ -345,6 +353,17 @@ struct CudaExec {
     if (n <= 0) return;
     long long threads = (long long)W * n;
     k_for_each_lanes_w<W><<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // for_each_lanes_w with kMinBlocks blocks of kBlock threads resident per multiprocessor
+  template <int W, int kMinBlocks, class F>
+  void for_each_lanes_w_bounded(int n, const F& f) {
+    activate();
+    if (n <= 0) return;
+    long long threads = (long long)W * n;
+    k_for_each_lanes_w_bounded<W, kBlock, kMinBlocks>
+        <<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 

@@ -65,6 +65,9 @@ struct Model {
   float list_radius;
   float rebuild_disp2;
   int max_neighbors;
+  // the `lists` pair pass: lanes sharing a particle's list (1, 2, 4 or 8; CUDA threads, the CPU
+  // runs them in turn); 0 in the parameters: chosen by the pipeline (auto_list_lanes)
+  int lanes;
   int n_probes;
   float probes[kMaxProbes * D];
   CPS_HD Vec<D> probe(int k) const {

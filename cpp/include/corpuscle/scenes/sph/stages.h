@@ -3,6 +3,7 @@
 // begin / visit / end stage (spatial/index.h) that every index runs.
 #pragma once
 #include "corpuscle/core/atomics.h"
+#include "corpuscle/core/lanes.h"
 #include "corpuscle/scenes/sph/model.h"
 
 namespace cps::sph {
@@ -143,6 +144,14 @@ struct InteractStage {
       s.acc += laminar_viscosity_acc_den<D>(m.lv, d, dv, den, rho_i, rho_j, m.mass, gw);
   }
 
+  // b's pair sums added to a's (lanes sharing a particle's list: a holds the lower lane's)
+  CPS_HD void merge(Acc& a, const Acc& b) const {
+    a.acc += b.acc;
+    a.drho += b.drho;
+    a.mu_max = fmax2(a.mu_max, b.mu_max);
+    a.nbrs += b.nbrs;
+  }
+
   CPS_HD void end(int i, Acc& s) const {
     StepSums it = StepSums::identity();
     it.p_max = a.prs[i];
@@ -199,6 +208,46 @@ struct ListGatherFn {
     view.gather(i, view.position(i), [&](int j, const Vec<View::kDim>& d, float r2) { stage.visit(acc, i, j, d, r2); });
     stage.end(i, acc);
   }
+};
+
+// the same with G lanes per slot (G = 2, 4 or 8; `sph.lanes`): lane l walks the list entries
+// l, l + G, ... of the slot (SlotListView::gather_lane) into its own partial sums, and the G
+// partial sums are merged in a fixed butterfly (offsets G/2, G/4, ..., 1; lane l takes lane
+// l + o's at offset o), so a slot's sums are the same on every run. On CUDA the G lanes are G
+// threads of a warp and the butterfly is made of shuffles; the CPU runs the G lanes one after
+// another and merges them in the same order (so the CPU and CUDA sum the same terms in the
+// same order, up to the device's fast square root and divisions).
+template <int G, class View, class Stage>
+struct ListGatherLanesFn {
+  static_assert(G >= 2 && G <= 32 && (G & (G - 1)) == 0, "lanes per slot: a power of two from 2 to 32");
+  View view;
+  Stage stage;
+  int base;
+  // lane l's partial sums of slot i
+  CPS_HD auto partial(int i, int l) const {
+    auto acc = stage.begin(i);
+    view.template gather_lane<G>(i, view.position(i), l,
+                                 [&](int j, const Vec<View::kDim>& d, float r2) { stage.visit(acc, i, j, d, r2); });
+    return acc;
+  }
+  // the CPU: the G lanes in turn, merged in the butterfly's order
+  CPS_HD void operator()(int k, const SingleLane&) const {
+    const int i = base + k;
+    decltype(stage.begin(i)) acc[G];
+    for (int l = 0; l < G; ++l) acc[l] = partial(i, l);
+    for (int o = G / 2; o > 0; o >>= 1)
+      for (int l = 0; l < o; ++l) stage.merge(acc[l], acc[l + o]);
+    stage.end(i, acc[0]);
+  }
+#ifdef __CUDACC__
+  // CUDA: G threads of a warp, merged by shuffles (lane 0 ends the slot)
+  __device__ void operator()(int k, const SubWarpLanes<G>& L) const {
+    const int i = base + k;
+    auto acc = partial(i, L.lane());
+    for (int o = G / 2; o > 0; o >>= 1) stage.merge(acc, L.shfl_xor(acc, o));
+    if (L.leader()) stage.end(i, acc);
+  }
+#endif
 };
 
 // stage 3 (one thread per probe): pressure and velocity at the probe points by kernel
