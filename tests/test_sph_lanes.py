@@ -124,3 +124,44 @@ def test_cuda_lanes_are_reproducible(lanes):
     b.step(30)
     for name in ("position", "velocity", "density", "wall_density"):
         assert np.array_equal(a.core.download(name), b.core.download(name)), name
+
+
+_GRAPH_RUN = r"""
+import sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from test_sph_lists import by_id, rebuilds, stirred_by_id
+from test_sph_lanes import lanes_sim
+sim = stirred_by_id(lanes_sim("dam-break-2d", int(sys.argv[3]), backend="cuda", particles=2000, sph__skin=0.2))
+sim.step(100)
+np.savez(sys.argv[2], position=by_id(sim, "position"), velocity=by_id(sim, "velocity"),
+         density=by_id(sim, "density"), rebuilds=rebuilds(sim), time=sim.time)
+"""
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("lanes", [1, 4])
+def test_cuda_skipped_sorts_change_nothing(tmp_path, lanes):
+    """The steps that do not relist skip the sort and the marks inside the captured graph (a
+    conditional node); with CORPUSCLE_GRAPH_CONDITIONALS=0 they run them (on unchanged keys):
+    the two runs must be bitwise equal, over steps that relist inside the graphs too."""
+    import os
+    import subprocess
+    import sys
+
+    if not Simulation.cuda_available():
+        pytest.skip("no CUDA")
+    here = os.path.dirname(os.path.abspath(__file__))
+    out = {}
+    for flag in ("1", "0"):
+        env = dict(os.environ, CORPUSCLE_GRAPH_CONDITIONALS=flag)
+        path = tmp_path / f"run{flag}.npz"
+        r = subprocess.run([sys.executable, "-c", _GRAPH_RUN, here, str(path), str(lanes)], env=env,
+                           capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        out[flag] = np.load(path)
+    assert int(out["1"]["rebuilds"]) >= 3  # relistings inside the captured steps too (the first is eager)
+    assert int(out["1"]["rebuilds"]) == int(out["0"]["rebuilds"])
+    assert float(out["1"]["time"]) == float(out["0"]["time"])
+    for name in ("position", "velocity", "density"):
+        assert np.array_equal(out["1"][name], out["0"][name]), name

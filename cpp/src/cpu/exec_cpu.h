@@ -324,6 +324,12 @@ struct CpuExec {
   // a whole step: CPU runs it directly
   template <class F>
   void launch_step(int /*parity*/, const F& enqueue) { enqueue(); }
+  // body() (the launches of a part of a step) when *flag != 0: here the flag is read at once
+  // (the stages before have run); CUDA skips the part inside a captured graph
+  template <class F>
+  void run_if(const int* flag, const F& body) {
+    if (*flag != 0) body();
+  }
   void reset_graphs() {}  // nothing is captured on the CPU
 
   // stage timing: host clock (the CPU work is synchronous)

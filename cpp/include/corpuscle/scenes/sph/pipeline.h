@@ -228,12 +228,22 @@ class Pipeline {
     ModelT* md = model_.data();
     Scene* g = g_;
     // 1. key and sort (fluid tag 0, walls tag 1), gather into cell order, mark, chunk
-    //    (lists: a step that does not relist keeps every slot's key, so the order stands, and
-    //    the lists are built on the steps that relist only)
-    if constexpr (kLists) grid_.sort_if(ex_, pos_[cur].data(), tags_.data(), n_, &g->rebuild);
-    else grid_.sort(ex_, pos_[cur].data(), tags_.data(), n_);
-    ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), kLists ? &g->rebuild : nullptr});
-    grid_.mark(ex_);
+    //    (lists: the key, sort and mark run only on the steps that relist, as a conditional part
+    //    of the step (Exec::run_if: on CUDA a conditional node of the captured graph, skipped
+    //    on the device's flag); run anyway (eagerly), a step that does not relist keeps every
+    //    slot's key, so the sort leaves the order and the marks as they were. The reorder then
+    //    takes slot j from slot j. The lists are built on the steps that relist only.)
+    if constexpr (kLists) {
+      ex_.run_if(&g->rebuild, [&] {
+        grid_.sort_if(ex_, pos_[cur].data(), tags_.data(), n_, &g->rebuild);
+        grid_.mark(ex_);
+      });
+      ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), &g->rebuild});
+    } else {
+      grid_.sort(ex_, pos_[cur].data(), tags_.data(), n_);
+      ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), nullptr});
+      grid_.mark(ex_);
+    }
     Arrays<D> s = arrays(nxt, cur);
     CellGridView<D> gv = grid_.view(s.pos);
     if constexpr (std::is_same_v<Index, CompactIndex>) compact_.build(ex_, gv);

@@ -20,7 +20,8 @@ CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
 // and the pressure of the sorted state from its density (Tait) with the pair loop's
 // per-particle factors p / rho^2 and m / rho (the same operations the pair terms would do per
 // pair: the same values). `lists`: on the steps that relist (*rebuild), the positions the
-// lists are built from are kept in x_build.
+// lists are built from are kept in x_build; the other steps keep the order (slot j from slot
+// j: their sort was skipped, and `order` is the last relisting's)
 template <int D>
 struct ReorderStage {
   const Model<D>* model;
@@ -28,7 +29,7 @@ struct ReorderStage {
   Arrays<D> a;
   const int* rebuild = nullptr;  // `lists` only
   CPS_HD void operator()(int j) const {
-    const int o = order[j];
+    const int o = rebuild && *rebuild == 0 ? j : order[j];
     const Vec<D> x = a.pos[o];
     a.pos_alt[j] = x;
     a.vel_alt[j] = a.vel[o];
