@@ -45,8 +45,10 @@ struct ReorderStage {
     for (int k = 0; k < 3; ++k) pv.v[k] = k < D ? v[k] : 0.0f;
     pv.pr2 = p / (rho * rho);
     a.pv[j] = pv;
-    a.pr[j] = PairRho{rho, model->mass / rho};
-    a.pos4[j] = VecA<D>::of(x);
+    VecA<D> x4 = VecA<D>::of(x);
+    if constexpr (D == 3) x4.v[3] = rho;  // (the pair loop's rho_j: see InteractStage::visit)
+    else a.pr[j] = PairRho{rho, model->mass / rho};
+    a.pos4[j] = x4;
     if (rebuild && *rebuild) a.x_build[j] = x;
   }
 };
@@ -127,15 +129,27 @@ struct InteractStage {
     s.drho += m.mass * dot(dv, gw);
     if (!fi) return;
     s.nbrs += 1;
-    const PairRho pr = a.pr[j];
-    const float rho_i = s.rho_i, rho_j = pr.rho;
+    // rho_j and V_j = m / rho_j: in 3-D rho_j rides in the padding of j's position (a line the
+    // lists' walk has just loaded: one neighbour load fewer) and V_j is computed here with the
+    // reorder's expression (an IEEE division on both backends: the same value); in 2-D both
+    // come from PairRho
+    float rho_j, vol_j;
+    if constexpr (D == 3) {
+      rho_j = a.pos4[j].v[3];
+      vol_j = m.mass / rho_j;
+    } else {
+      const PairRho pr = a.pr[j];
+      rho_j = pr.rho;
+      vol_j = pr.vol;
+    }
+    const float rho_i = s.rho_i;
     // r^2 + eta^2 and v_ij . r_ij, once for every term (each term's eta^2 is the same 0.01 hs^2,
     // PairConsts::make: so this is the value each would compute)
     const float den = r2 + m.eta2;
     const float vr = dot(dv, d);
     const float mu = sph_mu_den(m.hs, vr, den);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, den, rho_i, rho_j, pr.vol, gw);
+    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, den, rho_i, rho_j, vol_j, gw);
     // p_i / rho_i^2 + p_j / rho_j^2 (each computed once per particle, in the reorder)
     const float pterm = s.pr2_i + pv.pr2;
     s.acc -= gw * (m.mass * pterm);
