@@ -119,6 +119,11 @@ struct CpuExec {
     for_each_lanes(n, f);
   }
 
+  template <int W, int kMinBlocks, class F>
+  void for_each_lanes_w_bounded(int n, const F& f) const {
+    for_each_lanes(n, f);
+  }
+
   // for_each_lanes, then reduce_then
   template <class F, class T, class Op, class Fin>
   void for_each_lanes_reduce_then(int n, const F& f, const T* items, T* out, Op op, T init, const Fin& fin) const {
@@ -338,6 +343,12 @@ struct CpuExec {
   // a whole step: CPU runs it directly
   template <class F>
   void launch_step(int /*parity*/, const F& enqueue) { enqueue(); }
+  // body() (the launches of a part of a step) when *flag != 0: here the flag is read at once
+  // (the stages before have run); CUDA skips the part inside a captured graph
+  template <class F>
+  void run_if(const int* flag, const F& body) {
+    if (*flag != 0) body();
+  }
   void reset_graphs() {}  // nothing is captured on the CPU
 
   // stage timing: host clock (the CPU work is synchronous)

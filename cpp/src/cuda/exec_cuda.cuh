@@ -11,6 +11,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cub/cub.cuh>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <utility>
@@ -47,6 +48,14 @@ __global__ void k_for_each_warp(int n, F f) {
 // item leave together, so the group masks stay whole
 template <int W, class F>
 __global__ void k_for_each_lanes_w(int n, F f) {
+  long long t = (long long)blockIdx.x * blockDim.x + threadIdx.x;
+  int i = int(t / W);
+  if (i < n) f(i, SubWarpLanes<W>{});
+}
+
+// the same with launch bounds (kThreads a block, at least kMinBlocks blocks per multiprocessor)
+template <int W, int kThreads, int kMinBlocks, class F>
+__global__ void __launch_bounds__(kThreads, kMinBlocks) k_for_each_lanes_w_bounded(int n, F f) {
   long long t = (long long)blockIdx.x * blockDim.x + threadIdx.x;
   int i = int(t / W);
   if (i < n) f(i, SubWarpLanes<W>{});
@@ -116,6 +125,14 @@ __global__ void __launch_bounds__(kThreads) k_for_each_reduce_then(int n, F f, T
   block_reduce_then<T, Op, Fin, kThreads>(partials, int(gridDim.x), out, op, init, fin);
   if (threadIdx.x == 0) *counter = 0u;  // ready for the next launch
 }
+
+#if CUDART_VERSION >= 13000
+// the condition of run_if's conditional node: *flag != 0
+template <class Flag>
+__global__ void k_set_conditional(cudaGraphConditionalHandle h, const Flag* flag) {
+  cudaGraphSetConditional(h, *flag != 0 ? 1u : 0u);
+}
+#endif
 
 template <class F>
 __global__ void k_single(F f) {
@@ -279,6 +296,7 @@ struct CudaExec {
   }
   CudaExec(CudaExec&& o) noexcept
       : device_(o.device_), sms_(o.sms_), stream_(std::exchange(o.stream_, nullptr)),
+        side_(std::exchange(o.side_, nullptr)),
         temp_(std::exchange(o.temp_, nullptr)), temp_bytes_(std::exchange(o.temp_bytes_, 0)),
         counter_(std::exchange(o.counter_, nullptr)), poll_bytes_(std::exchange(o.poll_bytes_, 0)),
         stage_host_(std::exchange(o.stage_host_, nullptr)), stage_event_(std::exchange(o.stage_event_, nullptr)),
@@ -306,6 +324,7 @@ struct CudaExec {
     if (stage_host_) cudaFreeHost(stage_host_);
     if (stage_event_) cudaEventDestroy(stage_event_);
     if (frame_host_) cudaFreeHost(frame_host_);
+    if (side_) cudaStreamDestroy(side_);
     if (stream_) cudaStreamDestroy(stream_);
   }
 
@@ -373,6 +392,17 @@ struct CudaExec {
     if (n <= 0) return;
     long long threads = (long long)W * n;
     k_for_each_lanes_w<W><<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // for_each_lanes_w with kMinBlocks blocks of kBlock threads resident per multiprocessor
+  template <int W, int kMinBlocks, class F>
+  void for_each_lanes_w_bounded(int n, const F& f) {
+    activate();
+    if (n <= 0) return;
+    long long threads = (long long)W * n;
+    k_for_each_lanes_w_bounded<W, kBlock, kMinBlocks>
+        <<<unsigned((threads + kBlock - 1) / kBlock), kBlock, 0, stream_>>>(n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 
@@ -688,6 +718,61 @@ struct CudaExec {
     CPS_CUDA_CHECK(cudaGraphLaunch(graph_[parity], stream_));
   }
 
+  // body() (the launches of a part of a step) only when *flag != 0 (device memory, written by
+  // an earlier stage): in a captured step the part becomes the body of a conditional graph node
+  // (CUDA 12.4+ graphs: its launches, CUB's included, are captured into the node's body from a
+  // second stream) that a one-thread kernel switches on the flag, so a skipped part costs
+  // nothing of its own. Run eagerly (the first steps, profiling, no graphs), or on an older
+  // runtime, the body always runs: it must give the same state when the flag is 0 (every
+  // caller's body keeps the state as it was then, e.g. a sort of unchanged keys).
+  template <class F>
+  void run_if(const int* flag, const F& body) {
+    activate();
+    cudaStreamCaptureStatus st = cudaStreamCaptureStatusNone;
+    CPS_CUDA_CHECK(cudaStreamIsCapturing(stream_, &st));
+#if CUDART_VERSION >= 13000
+    if (st == cudaStreamCaptureStatusNone && !side_ && conditionals_supported()) {
+      // the body's capture stream, made while nothing is being captured
+      CPS_CUDA_CHECK(cudaStreamCreateWithFlags(&side_, cudaStreamNonBlocking));
+    }
+    if (st == cudaStreamCaptureStatusActive && side_) {
+      cudaGraph_t graph = nullptr;
+      CPS_CUDA_CHECK(cudaStreamGetCaptureInfo(stream_, &st, nullptr, &graph, nullptr, nullptr, nullptr));
+      cudaGraphConditionalHandle h;
+      CPS_CUDA_CHECK(cudaGraphConditionalHandleCreate(&h, graph, 0u, cudaGraphCondAssignDefault));
+      k_set_conditional<<<1, 1, 0, stream_>>>(h, flag);
+      CPS_CUDA_LAUNCH_CHECK();
+      const cudaGraphNode_t* deps = nullptr;
+      size_t ndeps = 0;
+      CPS_CUDA_CHECK(cudaStreamGetCaptureInfo(stream_, &st, nullptr, &graph, &deps, nullptr, &ndeps));
+      cudaGraphNodeParams params = {};
+      params.type = cudaGraphNodeTypeConditional;
+      params.conditional.handle = h;
+      params.conditional.type = cudaGraphCondTypeIf;
+      params.conditional.size = 1;
+      cudaGraphNode_t node;
+      CPS_CUDA_CHECK(cudaGraphAddNode(&node, graph, deps, nullptr, ndeps, &params));
+      CPS_CUDA_CHECK(cudaStreamUpdateCaptureDependencies(stream_, &node, nullptr, 1, cudaStreamSetCaptureDependencies));
+      cudaGraph_t body_graph = params.conditional.phGraph_out[0];
+      CPS_CUDA_CHECK(cudaStreamBeginCaptureToGraph(side_, body_graph, nullptr, nullptr, 0,
+                                                   cudaStreamCaptureModeThreadLocal));
+      // the body's launches go to the side stream (restored however the body ends)
+      struct Restore {
+        cudaStream_t& s;
+        cudaStream_t main;
+        ~Restore() { s = main; }
+      } restore{stream_, stream_};
+      stream_ = side_;
+      body();
+      stream_ = restore.main;
+      CPS_CUDA_CHECK(cudaStreamEndCapture(side_, &body_graph));
+      return;
+    }
+#endif
+    (void)flag;
+    body();
+  }
+
   // stage timing with CUDA events between stages
   void profile_begin() {
     activate();
@@ -757,6 +842,21 @@ struct CudaExec {
     CPS_CUDA_CHECK(cudaMemset(counter_, 0, sizeof(unsigned)));
   }
 
+#if CUDART_VERSION >= 13000
+  // conditional graph nodes with memsets in their bodies: a driver of CUDA 12.4 or later;
+  // CORPUSCLE_GRAPH_CONDITIONALS=0 in the environment turns them off (run_if's body then runs
+  // on every step, as before they were used: for timing one against the other)
+  static bool conditionals_supported() {
+    static const bool ok = [] {
+      const char* e = std::getenv("CORPUSCLE_GRAPH_CONDITIONALS");
+      if (e && std::strcmp(e, "0") == 0) return false;
+      int v = 0;
+      return cudaDriverGetVersion(&v) == cudaSuccess && v >= 12040;
+    }();
+    return ok;
+  }
+#endif
+
   void ensure_temp(size_t bytes) {
     activate();
     if (bytes <= temp_bytes_) return;
@@ -782,6 +882,7 @@ struct CudaExec {
   int device_ = 0;
   int sms_ = 0;  // multiprocessors of the device
   cudaStream_t stream_ = nullptr;
+  cudaStream_t side_ = nullptr;  // run_if's capture stream for conditional bodies
   void* temp_ = nullptr;
   size_t temp_bytes_ = 0;
   unsigned* counter_ = nullptr;  // blocks finished, for the fused reduction

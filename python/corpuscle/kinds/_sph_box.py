@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene import INT64_MAX, KeySpec, SceneError, SceneKind, check_le
+from ..scene import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, key_values
 
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
@@ -73,6 +73,10 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
         "sph.skin": _K("float", 0.1, "h", 0.0, 1.0,
                        "--neighbors lists: the lists reach h (1 + skin), h the kernel support, and are reused "
                        "until a particle has moved skin h / 2; 0 relists every step"),
+        "sph.lanes": _K("int", 0, "", 0, 8,
+                        "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
+                        "(their partial sums merged in a fixed order); 0: chosen by the state's size (8 below "
+                        "65,536 fluid particles, 4 from there; the CPU backends 1)"),
         "timestep.cfl": _K("float", 0.2, "", 0.0, 1.0, "CFL number of the time step (DualSPHysics: 0.2)", lo_open=True),
         "timestep.dt_min": _K("float", 1e-9, "s", 0.0, 1.0, "smallest time step", lo_open=True),
         "timestep.dt_max": _K("float", 1e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),
@@ -86,6 +90,12 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
 def probe_keys(dim: int) -> dict[str, KeySpec]:
     return {"name": _K("str", "", "", doc="probe name (letters, digits, _ and -)"),
             "position": _K(f"vec{dim}", [0.0] * dim, "m", -1e4, 1e4, "where pressure and velocity are sampled")}
+
+
+def _check_lanes(values, arrays) -> None:
+    """sph.lanes is a width the lists pair pass has (or 0: automatic)."""
+    if values["sph.lanes"] not in (0, 1, 2, 4, 8):
+        raise SceneError(f"sph.lanes must be 0 (automatic), 1, 2, 4 or 8, got {_fmt_value(values['sph.lanes'])}")
 
 
 def _check_probes(values, arrays) -> None:
@@ -199,6 +209,7 @@ class SphBox(Kind):
         params["list_radius"] = h * (1.0 + skin)
         params["rebuild_distance"] = 0.5 * skin * h * (1.0 - 1e-5)  # (a margin for the float distances)
         params["max_neighbors"] = int(math.ceil((1.3 * mean + 32) / 32.0)) * 32 if target.index == "lists" else 1
+        params["lanes"] = int(v["sph.lanes"])
         check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
                      f"{nf_est + box_cells} particles")
         # the walls: every lattice point of the box widened by `layers` that is not inside it
@@ -345,5 +356,5 @@ def column_height(pos: np.ndarray, dp: float) -> float:
 def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int, checks=()) -> SceneKind:
     return SceneKind(name=name, description=description, keys=keys, arrays={"probes": probe_keys(dim)},
                      required_in_arrays={"probes": ("name", "position")},
-                     checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, *checks])
+                     checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_lanes, *checks])
 

@@ -2,6 +2,8 @@
 // runs one lane per item; CUDA runs a warp per item so neighbour loads are coalesced and
 // small particle counts still fill the GPU. A functor written against `Lanes` works for both.
 #pragma once
+#include <cstring>
+
 #include "corpuscle/spatial/grid.h"
 
 namespace cps {
@@ -115,6 +117,19 @@ struct SubWarpLanes {
     return v;
   }
   __device__ bool leader() const { return lane() == 0; }
+  // the value of v held by lane lane() ^ o of the group (any trivially copyable T of whole
+  // 32-bit words, moved word by word: a visitor's partial sums)
+  template <class T>
+  __device__ T shfl_xor(const T& v, int o) const {
+    static_assert(sizeof(T) % 4 == 0, "shfl_xor moves whole 32-bit words");
+    constexpr int kWords = int(sizeof(T) / 4);
+    unsigned w[kWords];
+    memcpy(w, &v, sizeof(T));
+    for (int k = 0; k < kWords; ++k) w[k] = __shfl_xor_sync(mask(), w[k], o, W);
+    T r;
+    memcpy(&r, w, sizeof(T));
+    return r;
+  }
 
   template <int D, class Visitor>
   __device__ int for_each_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,

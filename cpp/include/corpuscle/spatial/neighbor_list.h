@@ -198,23 +198,35 @@ struct SlotListView {
   CPS_HD void pairs(int i, const Vec<D>& xi, Visit&& visit) const {
     walk<true>(i, xi, visit);
   }
+  // lane `lane` of kWidth lanes sharing slot i's list: entries lane, lane + kWidth, ... (in
+  // the build's order; the kWidth lanes together visit what gather visits). Entry k of slot i
+  // lies at nbr[k * stride + i], so a warp of 32 / kWidth slots reads kWidth rows of
+  // 32 / kWidth consecutive entries a round: for kWidth <= 4 as many 32-byte sectors as one
+  // row of 32 (kWidth = 8: twice as many)
+  template <int kWidth, class Visit>
+  CPS_HD void gather_lane(int i, const Vec<D>& xi, int lane, Visit&& visit) const {
+    walk<false, kWidth>(i, xi, visit, lane);
+  }
   // the listed entries in the order the build found them, within the query radius now. Written
   // as "find the next entry within the radius, then visit it": on a device the lanes of a warp
   // search their lists apart (a few instructions an entry) and run the visitor together, so an
-  // entry past the radius costs a lane the search only, not an idle pass through the visitor
-  template <bool kPairs, class Visit>
-  CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit) const {
+  // entry past the radius costs a lane the search only, not an idle pass through the visitor.
+  // kWidth > 1: every kWidth-th entry from `first` (gather_lane)
+  template <bool kPairs, int kWidth = 1, class Visit>
+  CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit, int first = 0) const {
+    static_assert(kWidth >= 1, "a walk takes at least every entry");
     const int c = count(i);
-    const int* e = nbr + i;
-    int k = 0;
+    const int* e = nbr + i + size_t(first) * stride;
+    const size_t step = size_t(kWidth) * stride;
+    int k = first;
     for (;;) {
       int j = -1;
       Vec<D> d;
       float rr = 0.0f;
       while (k < c) {
         const int jj = *e;
-        ++k;
-        e += stride;
+        k += kWidth;
+        e += step;
         if (kPairs && jj <= i) continue;
         d = xi - VecA<D>::load(pos + jj);
         rr = norm2(d);

@@ -76,6 +76,9 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   if (!(rebuild >= 0.0f) || !(2.0f * rebuild <= m.list_radius - m.h + 1e-6f * m.h))
     throw Error(std::string(kind) + ": rebuild_distance must be in [0, (list_radius - h) / 2], got " + std::to_string(rebuild));
   if (m.max_neighbors < 1) throw Error(std::string(kind) + ": max_neighbors must be at least 1");
+  m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
+  if (m.lanes != 0 && m.lanes != 1 && m.lanes != 2 && m.lanes != 4 && m.lanes != 8)
+    throw Error(std::string(kind) + ": lanes must be 0 (automatic), 1, 2, 4 or 8, got " + std::to_string(p.integer("lanes")));
   auto probes = p.numbers("probes");
   if (probes.size() % D != 0) throw Error(std::string(kind) + ": probes need " + std::to_string(D) + " numbers each");
   m.n_probes = int(probes.size() / D);

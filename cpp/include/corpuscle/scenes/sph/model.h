@@ -65,6 +65,9 @@ struct Model {
   float list_radius;
   float rebuild_disp2;
   int max_neighbors;
+  // the `lists` pair pass: lanes sharing a particle's list (1, 2, 4 or 8; CUDA threads, the CPU
+  // runs them in turn); 0 in the parameters: chosen by the pipeline (auto_list_lanes)
+  int lanes;
   int n_probes;
   float probes[kMaxProbes * D];
   CPS_HD Vec<D> probe(int k) const {
@@ -149,7 +152,7 @@ struct Scene {
 
 // what the pair loop reads of a neighbour j besides its position, packed for one vector load
 // each (the same values as the arrays they come from): velocity (3-D; 2-D: the first two) and
-// p / rho^2 in 16 bytes, rho and m / rho in 8
+// p / rho^2 in 16 bytes, rho and m / rho in 8 (2-D; 3-D: rho in the padding of pos4)
 struct alignas(16) PairVel {
   float v[3];
   float pr2;
@@ -168,8 +171,9 @@ struct Arrays {
   int *id, *id_alt;
   float* prs;        // pressure of the sorted state (from rho by Tait)
   PairVel* pv;       // the pair loop's velocity and p / rho^2 of the sorted state
-  PairRho* pr;       // the pair loop's rho and m / rho (the density diffusion's V_j)
-  VecA<D>* pos4;     // the sorted positions padded for one vector load (the lists' walk)
+  PairRho* pr;       // 2-D: the pair loop's rho and m / rho (the density diffusion's V_j)
+  VecA<D>* pos4;     // the sorted positions padded for one vector load (the lists' walk); 3-D:
+                     // the density in the fourth float (the pair loop's rho_j)
   Vec<D>* x_build;   // `lists`: positions at the last build (sorted slots; null for other indexes)
   Vec<D>* acc;       // dv/dt (fluid; zero for walls)
   float* drho;       // drho/dt

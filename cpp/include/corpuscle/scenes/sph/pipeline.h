@@ -22,6 +22,8 @@
 //             lists. The integration raises the next step's relisting when a particle has
 //             moved more than skin h / 2 since the build (so every pair within h then was within
 //             h (1 + skin) at the build). skin = 0: relists every step, bit-identical to grid.
+//             The pair pass runs model.lanes lanes per particle (sph.lanes: 1 a thread per
+//             particle; 2, 4 or 8 threads splitting its list, ListGatherLanesFn).
 #pragma once
 #include <cmath>
 #include <string>
@@ -68,6 +70,20 @@ struct DamBreak2Kind {
   static constexpr const char* name = "dam-break-2d";
 };
 
+// the `lists` pair pass's lanes per particle when the scene does not say (sph.lanes = 0): the
+// CPU one; CUDA kListLanes (a warp then spans 32 / kListLanes neighbouring particles, whose
+// neighbours' data the multiprocessor's L1 holds for all of them), or kSmallListLanes for
+// fewer than kSmallListParticles fluid particles (more threads for a small state). Not yet
+// measured against a thread per particle: the commands are in docs/benchmarks.md.
+constexpr int kListLanes = 4;
+constexpr int kSmallListLanes = 8;
+constexpr int kSmallListParticles = 1 << 16;
+template <class Exec>
+inline int auto_list_lanes(int n_fluid) {
+  if constexpr (!Exec::on_device) return 1;
+  else return n_fluid < kSmallListParticles ? kSmallListLanes : kListLanes;
+}
+
 constexpr int kAllPairsTile = 128;
 constexpr int kChunk = 32;
 
@@ -112,6 +128,9 @@ class Pipeline {
     nf_ = m.n_fluid;
     n_ = m.n_fluid + m.n_wall;
     if (nf_ <= 0) throw Error(std::string(kind) + ": no fluid particles");
+    if (m_.lanes == 0) m_.lanes = kLists ? auto_list_lanes<Exec>(nf_) : 1;
+    if (m_.lanes != 1 && m_.lanes != 2 && m_.lanes != 4 && m_.lanes != 8)
+      throw Error(std::string(kind) + ": lanes must be 1, 2, 4 or 8 (0: automatic), got " + std::to_string(m_.lanes));
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(ModelT));
     for (int p = 0; p < 2; ++p) {
@@ -209,12 +228,22 @@ class Pipeline {
     ModelT* md = model_.data();
     Scene* g = g_;
     // 1. key and sort (fluid tag 0, walls tag 1), gather into cell order, mark, chunk
-    //    (lists: a step that does not relist keeps every slot's key, so the order stands, and
-    //    the lists are built on the steps that relist only)
-    if constexpr (kLists) grid_.sort_if(ex_, pos_[cur].data(), tags_.data(), n_, &g->rebuild);
-    else grid_.sort(ex_, pos_[cur].data(), tags_.data(), n_);
-    ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), kLists ? &g->rebuild : nullptr});
-    grid_.mark(ex_);
+    //    (lists: the key, sort and mark run only on the steps that relist, as a conditional part
+    //    of the step (Exec::run_if: on CUDA a conditional node of the captured graph, skipped
+    //    on the device's flag); run anyway (eagerly), a step that does not relist keeps every
+    //    slot's key, so the sort leaves the order and the marks as they were. The reorder then
+    //    takes slot j from slot j. The lists are built on the steps that relist only.)
+    if constexpr (kLists) {
+      ex_.run_if(&g->rebuild, [&] {
+        grid_.sort_if(ex_, pos_[cur].data(), tags_.data(), n_, &g->rebuild);
+        grid_.mark(ex_);
+      });
+      ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), &g->rebuild});
+    } else {
+      grid_.sort(ex_, pos_[cur].data(), tags_.data(), n_);
+      ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), nullptr});
+      grid_.mark(ex_);
+    }
     Arrays<D> s = arrays(nxt, cur);
     CellGridView<D> gv = grid_.view(s.pos);
     if constexpr (std::is_same_v<Index, CompactIndex>) compact_.build(ex_, gv);
@@ -228,10 +257,13 @@ class Pipeline {
     // 2. the pair sums through the index
     InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
     if constexpr (kLists) {
-      using Fn = ListGatherFn<SlotListView<D>, InteractStage<D>>;
       const SlotListView<D> lv = lists_.view(s.pos4, m_.h);
-      ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, Fn{lv, st, 0});
-      if (n_ > nf_) ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
+      switch (m_.lanes) {
+        case 2: list_pass<2>(lv, st); break;
+        case 4: list_pass<4>(lv, st); break;
+        case 8: list_pass<8>(lv, st); break;
+        default: list_pass<1>(lv, st); break;
+      }
     } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
       AllPairsView<D> av{s.pos, n_, m_.h * m_.h};
       if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
@@ -324,11 +356,26 @@ class Pipeline {
     if constexpr (kLists) {
       out.push_back({"list_capacity", double(m_.max_neighbors)});
       out.push_back({"list_radius", double(m_.list_radius)});
+      out.push_back({"lanes", double(m_.lanes)});  // lanes per particle in the pair pass
     }
     return out;
   }
 
  private:
+  // the `lists` pair pass with G lanes per particle (the fluid, then the walls)
+  template <int G>
+  void list_pass(const SlotListView<D>& lv, const InteractStage<D>& st) {
+    if constexpr (G == 1) {
+      using Fn = ListGatherFn<SlotListView<D>, InteractStage<D>>;
+      ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, Fn{lv, st, 0});
+      if (n_ > nf_) ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
+    } else {
+      using Fn = ListGatherLanesFn<G, SlotListView<D>, InteractStage<D>>;
+      ex_.template for_each_lanes_w_bounded<G, kPairBlocksPerSM>(nf_, Fn{lv, st, 0});
+      if (n_ > nf_) ex_.template for_each_lanes_w_bounded<G, kPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
+    }
+  }
+
   Arrays<D> arrays(int cur, int nxt) {
     Arrays<D> a;
     a.pos = pos_[cur].data();

@@ -3,6 +3,7 @@
 // begin / visit / end stage (spatial/index.h) that every index runs.
 #pragma once
 #include "corpuscle/core/atomics.h"
+#include "corpuscle/core/lanes.h"
 #include "corpuscle/scenes/sph/model.h"
 
 namespace cps::sph {
@@ -19,7 +20,8 @@ CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
 // and the pressure of the sorted state from its density (Tait) with the pair loop's
 // per-particle factors p / rho^2 and m / rho (the same operations the pair terms would do per
 // pair: the same values). `lists`: on the steps that relist (*rebuild), the positions the
-// lists are built from are kept in x_build.
+// lists are built from are kept in x_build; the other steps keep the order (slot j from slot
+// j: their sort was skipped, and `order` is the last relisting's)
 template <int D>
 struct ReorderStage {
   const Model<D>* model;
@@ -27,7 +29,7 @@ struct ReorderStage {
   Arrays<D> a;
   const int* rebuild = nullptr;  // `lists` only
   CPS_HD void operator()(int j) const {
-    const int o = order[j];
+    const int o = rebuild && *rebuild == 0 ? j : order[j];
     const Vec<D> x = a.pos[o];
     a.pos_alt[j] = x;
     a.vel_alt[j] = a.vel[o];
@@ -43,8 +45,10 @@ struct ReorderStage {
     for (int k = 0; k < 3; ++k) pv.v[k] = k < D ? v[k] : 0.0f;
     pv.pr2 = p / (rho * rho);
     a.pv[j] = pv;
-    a.pr[j] = PairRho{rho, model->mass / rho};
-    a.pos4[j] = VecA<D>::of(x);
+    VecA<D> x4 = VecA<D>::of(x);
+    if constexpr (D == 3) x4.v[3] = rho;  // (the pair loop's rho_j: see InteractStage::visit)
+    else a.pr[j] = PairRho{rho, model->mass / rho};
+    a.pos4[j] = x4;
     if (rebuild && *rebuild) a.x_build[j] = x;
   }
 };
@@ -125,15 +129,27 @@ struct InteractStage {
     s.drho += m.mass * dot(dv, gw);
     if (!fi) return;
     s.nbrs += 1;
-    const PairRho pr = a.pr[j];
-    const float rho_i = s.rho_i, rho_j = pr.rho;
+    // rho_j and V_j = m / rho_j: in 3-D rho_j rides in the padding of j's position (a line the
+    // lists' walk has just loaded: one neighbour load fewer) and V_j is computed here with the
+    // reorder's expression (an IEEE division on both backends: the same value); in 2-D both
+    // come from PairRho
+    float rho_j, vol_j;
+    if constexpr (D == 3) {
+      rho_j = a.pos4[j].v[3];
+      vol_j = m.mass / rho_j;
+    } else {
+      const PairRho pr = a.pr[j];
+      rho_j = pr.rho;
+      vol_j = pr.vol;
+    }
+    const float rho_i = s.rho_i;
     // r^2 + eta^2 and v_ij . r_ij, once for every term (each term's eta^2 is the same 0.01 hs^2,
     // PairConsts::make: so this is the value each would compute)
     const float den = r2 + m.eta2;
     const float vr = dot(dv, d);
     const float mu = sph_mu_den(m.hs, vr, den);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, den, rho_i, rho_j, pr.vol, gw);
+    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, den, rho_i, rho_j, vol_j, gw);
     // p_i / rho_i^2 + p_j / rho_j^2 (each computed once per particle, in the reorder)
     const float pterm = s.pr2_i + pv.pr2;
     s.acc -= gw * (m.mass * pterm);
@@ -141,6 +157,14 @@ struct InteractStage {
       s.acc += artificial_viscosity_acc_mu<D>(m.av, vr, mu, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
     else
       s.acc += laminar_viscosity_acc_den<D>(m.lv, d, dv, den, rho_i, rho_j, m.mass, gw);
+  }
+
+  // b's pair sums added to a's (lanes sharing a particle's list: a holds the lower lane's)
+  CPS_HD void merge(Acc& a, const Acc& b) const {
+    a.acc += b.acc;
+    a.drho += b.drho;
+    a.mu_max = fmax2(a.mu_max, b.mu_max);
+    a.nbrs += b.nbrs;
   }
 
   CPS_HD void end(int i, Acc& s) const {
@@ -199,6 +223,46 @@ struct ListGatherFn {
     view.gather(i, view.position(i), [&](int j, const Vec<View::kDim>& d, float r2) { stage.visit(acc, i, j, d, r2); });
     stage.end(i, acc);
   }
+};
+
+// the same with G lanes per slot (G = 2, 4 or 8; `sph.lanes`): lane l walks the list entries
+// l, l + G, ... of the slot (SlotListView::gather_lane) into its own partial sums, and the G
+// partial sums are merged in a fixed butterfly (offsets G/2, G/4, ..., 1; lane l takes lane
+// l + o's at offset o), so a slot's sums are the same on every run. On CUDA the G lanes are G
+// threads of a warp and the butterfly is made of shuffles; the CPU runs the G lanes one after
+// another and merges them in the same order (so the CPU and CUDA sum the same terms in the
+// same order, up to the device's fast square root and divisions).
+template <int G, class View, class Stage>
+struct ListGatherLanesFn {
+  static_assert(G >= 2 && G <= 32 && (G & (G - 1)) == 0, "lanes per slot: a power of two from 2 to 32");
+  View view;
+  Stage stage;
+  int base;
+  // lane l's partial sums of slot i
+  CPS_HD auto partial(int i, int l) const {
+    auto acc = stage.begin(i);
+    view.template gather_lane<G>(i, view.position(i), l,
+                                 [&](int j, const Vec<View::kDim>& d, float r2) { stage.visit(acc, i, j, d, r2); });
+    return acc;
+  }
+  // the CPU: the G lanes in turn, merged in the butterfly's order
+  CPS_HD void operator()(int k, const SingleLane&) const {
+    const int i = base + k;
+    decltype(stage.begin(i)) acc[G];
+    for (int l = 0; l < G; ++l) acc[l] = partial(i, l);
+    for (int o = G / 2; o > 0; o >>= 1)
+      for (int l = 0; l < o; ++l) stage.merge(acc[l], acc[l + o]);
+    stage.end(i, acc[0]);
+  }
+#ifdef __CUDACC__
+  // CUDA: G threads of a warp, merged by shuffles (lane 0 ends the slot)
+  __device__ void operator()(int k, const SubWarpLanes<G>& L) const {
+    const int i = base + k;
+    auto acc = partial(i, L.lane());
+    for (int o = G / 2; o > 0; o >>= 1) stage.merge(acc, L.shfl_xor(acc, o));
+    if (L.leader()) stage.end(i, acc);
+  }
+#endif
 };
 
 // stage 3 (one thread per probe): pressure and velocity at the probe points by kernel
