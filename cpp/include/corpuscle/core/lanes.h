@@ -6,6 +6,15 @@
 
 namespace cps {
 
+// A list of slot indices as the lanes write and read it: `put(e, j)` stores slot j as entry
+// e, `get(e)` gives it back. This one stores them as they are; a stage may pass a type of its
+// own with the same two members (one that stores them narrower, say).
+struct SlotList {
+  int* p;
+  CPS_HD int get(int e) const { return p[e]; }
+  CPS_HD void put(int e, int j) const { p[e] = j; }
+};
+
 // one lane: the plain serial loop
 struct SingleLane {
   CPS_HD float sum(float x) const { return x; }
@@ -14,12 +23,12 @@ struct SingleLane {
   CPS_HD bool leader() const { return true; }
   // the plain cell-by-cell neighbour loop, listing the neighbours (up to cap; returns how
   // many there were)
-  template <int D, class Visitor>
+  template <int D, class Visitor, class List>
   CPS_HD int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                       int* list, int cap) const {
+                                       const List& list, int cap) const {
     int count = 0;
     auto listing = [&](int j, const Vec<D>& d, float r2) {
-      if (count < cap) list[count] = j;
+      if (count < cap) list.put(count, j);
       ++count;
       visit(j, d, r2);
     };
@@ -44,40 +53,40 @@ struct SingleLane {
   }
   // list every j in [begin, end) closer than sqrt(r2max) to xi after the `count` already
   // listed (up to cap), in index order; returns the new count (the true one, past cap)
-  template <int D>
-  CPS_HD int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list, int cap,
-                           int count) const {
+  template <int D, class List>
+  CPS_HD int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, const List& list,
+                           int cap, int count) const {
     for (int j = begin; j < end; ++j) {
       Vec<D> d = xi - pos[j];
       if (norm2(d) < r2max) {
-        if (count < cap) list[count] = j;
+        if (count < cap) list.put(count, j);
         ++count;
       }
     }
     return count;
   }
   // visit the listed neighbours of xi
-  template <int D, class Visitor>
-  CPS_HD void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) const {
+  template <int D, class Visitor, class List>
+  CPS_HD void for_each_listed(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) const {
     for (int e = 0; e < count; ++e) {
-      const int j = list[e];
+      const int j = list.get(e);
       Vec<D> d = xi - pos[j];
       visit(j, d, norm2(d));
     }
   }
   // visit the listed neighbours of xi and copy those closer than sqrt(r2max) to `out`, in
   // order (up to cap); returns how many there were
-  template <int D, class Visitor>
-  CPS_HD int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
-                                        Visitor& visit, float r2max, int* out, int cap) const {
+  template <int D, class Visitor, class List>
+  CPS_HD int for_each_listed_compacting(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                        Visitor& visit, float r2max, const List& out, int cap) const {
     int kept = 0;
     for (int e = 0; e < count; ++e) {
-      const int j = list[e];
+      const int j = list.get(e);
       Vec<D> d = xi - pos[j];
       float r2 = norm2(d);
       visit(j, d, r2);
       if (r2 < r2max) {
-        if (kept < cap) out[kept] = j;
+        if (kept < cap) out.put(kept, j);
         ++kept;
       }
     }
@@ -135,9 +144,9 @@ struct SubWarpLanes {
   }
 
   // SingleLane::list_in_range: W candidates a round, hits listed in index order by a ballot
-  template <int D>
-  __device__ int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list,
-                               int cap, int count) const {
+  template <int D, class List>
+  __device__ int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
+                               const List& list, int cap, int count) const {
     const unsigned below = (1u << lane()) - 1u;
     for (int b = begin; b < end; b += W) {
       const int j = b + lane();
@@ -149,33 +158,34 @@ struct SubWarpLanes {
       const unsigned m = group_ballot(hit);
       if (hit) {
         const int at = count + __popc(m & below);
-        if (at < cap) list[at] = j;
+        if (at < cap) list.put(at, j);
       }
       count += __popc(m);
     }
     return count;
   }
 
-  template <int D, class Visitor>
-  __device__ void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+  template <int D, class Visitor, class List>
+  __device__ void for_each_listed(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi,
                                   Visitor& visit) const {
     for (int e = lane(); e < count; e += W) {
-      const int j = list[e];
+      const int j = list.get(e);
       Vec<D> d = xi - pos[j];
       visit(j, d, norm2(d));
     }
   }
 
-  template <int D, class Visitor>
-  __device__ int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
-                                            Visitor& visit, float r2max, int* out, int cap) const {
+  template <int D, class Visitor, class List>
+  __device__ int for_each_listed_compacting(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                            Visitor& visit, float r2max, const List& out, int cap) const {
     const unsigned below = (1u << lane()) - 1u;
     int kept = 0;
     for (int b = 0; b < count; b += W) {
       const int e = b + lane();
       bool near = false;
+      int j = 0;
       if (e < count) {
-        const int j = list[e];
+        j = list.get(e);
         Vec<D> d = xi - pos[j];
         float r2 = norm2(d);
         visit(j, d, r2);
@@ -184,7 +194,7 @@ struct SubWarpLanes {
       const unsigned m = group_ballot(near);
       if (near) {
         const int at = kept + __popc(m & below);
-        if (at < cap) out[at] = list[e];
+        if (at < cap) out.put(at, j);
       }
       kept += __popc(m);
     }
@@ -193,9 +203,9 @@ struct SubWarpLanes {
 
   // the cell walk in WarpLanes' order (the stencil's cells of the fluid layer, then of the
   // ghost layer; ascending index in each), up to cap listed
-  template <int D, class Visitor>
+  template <int D, class Visitor, class List>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           int* list, int cap) const {
+                                           const List& list, int cap) const {
     const int nslots = kStencil<D> * (ghosts ? 2 : 1);
     int c[D];
     g.spec.cell_of(xi, c);
@@ -218,7 +228,7 @@ struct SubWarpLanes {
         const unsigned m = group_ballot(hit);
         if (hit) {
           const int at = count + __popc(m & below);
-          if (at < cap) list[at] = int(j);
+          if (at < cap) list.put(at, int(j));
           visit(int(j), d, r2);
         }
         count += __popc(m);
@@ -236,9 +246,9 @@ struct WarpLanes : SubWarpLanes<32> {
   // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
   // serial loop's order (cell by cell, ascending index: a ballot keeps lane order), up to cap;
   // returns how many there were (the same on every lane).
-  template <int D, class Visitor>
+  template <int D, class Visitor, class List>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           int* list, int cap) const {
+                                           const List& list, int cap) const {
     const int nslots = kStencil<D> * (ghosts ? 2 : 1);
     const int l = lane();
     int c[D];
@@ -264,7 +274,7 @@ struct WarpLanes : SubWarpLanes<32> {
         const unsigned mask = __ballot_sync(0xffffffffu, hit);
         if (hit) {
           const int at = count + __popc(mask & below);
-          if (at < cap) list[at] = int(j);
+          if (at < cap) list.put(at, int(j));
           visit(int(j), d, r2);
         }
         count += __popc(mask);

@@ -50,6 +50,38 @@ struct Scenes {
   }
 };
 
+// A particle's list of neighbour slots (lanes.h's SlotList protocol): 32-bit slot indices, or,
+// where Model::narrow_lists, 16-bit numbers local to the scene (they halve the lists' memory
+// traffic): fluid slot s n + l as l, ghost slot N + s n + l as n + l (a single run's local
+// number is its slot). Every entry is a slot of the particle's own scene: a pair never
+// crosses scenes.
+template <bool Many>
+struct SceneList {
+  int* wide;
+  uint16_t* narrow;  // used when not null
+  int first;         // the scene's first fluid slot (s n)
+  int n;             // fluid slots a scene
+  int shift;         // N - n: the slot of local ghost number n + l is first + shift + n + l
+  CPS_HD static SceneList at(const Model& m, int* wide, uint16_t* narrow, int s, size_t offset) {
+    const int n = m.n_fluid;
+    return SceneList{m.narrow_lists ? nullptr : wide + offset, m.narrow_lists ? narrow + offset : nullptr,
+                     Many ? s * n : 0, n, Many ? Scenes<Many>::fluid(m) - n : 0};
+  }
+  CPS_HD int get(int e) const {
+    if (!narrow) return wide[e];
+    const int l = narrow[e];
+    return first + l + (l < n ? 0 : shift);
+  }
+  CPS_HD void put(int e, int j) const {
+    if (!narrow) {
+      wide[e] = j;
+      return;
+    }
+    const int l = j - first;
+    narrow[e] = uint16_t(l < n ? l : l - shift);
+  }
+};
+
 // whether fluid slot i holds a particle: a scene of n_active particles uses the first n_active
 // slots of its range (a single scene all of them)
 CPS_HD CPS_INLINE bool active_slot(const Model& m, const Scene* g, int i) {
@@ -267,15 +299,16 @@ struct PairWalk {
                              const Vec3& x, const Lanes& L, V& v, int& count, int& kept) {
     NoVisit none;
     if constexpr (Index::lists) {
-      int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
+      const int s = Scenes<Many>::of(m, i);
+      const SceneList<Many> list = SceneList<Many>::at(m, a.nbr, a.nbr16, s, size_t(i) * size_t(m.max_neighbors));
       if (!rebuilding(m, g)) count = a.nbr_count[i];
       else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
       else count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
-      int* near = a.near + size_t(i) * size_t(m.max_near);
+      const SceneList<Many> near = SceneList<Many>::at(m, a.near, a.near16, s, size_t(i) * size_t(m.max_near));
       kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
                                           m.kern.h2, near, m.max_near);
     } else if constexpr (Index::cells) {
-      kept = count = L.for_each_neighbor_listing(grid, x, true, v, nullptr, 0);
+      kept = count = L.for_each_neighbor_listing(grid, x, true, v, SlotList{nullptr}, 0);
     } else {
       kept = count = all_pairs(m, g, grid, i, x, L, v);
     }
@@ -284,9 +317,9 @@ struct PairWalk {
   // the cell walk: the same neighbours within the list radius, in index order. For small
   // scenes (h a good part of the container radius) the 27 cells around a particle hold most
   // of its scene anyway, in many short cell ranges; the scan walks it in full rounds
-  template <class Lanes>
+  template <class Lanes, class List>
   CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
-                               const Lanes& L, int* list) {
+                               const Lanes& L, const List& list) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
     const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, grid.spec.h2, list,
                                       m.max_neighbors, 0);
@@ -305,10 +338,11 @@ struct PairWalk {
                             const Vec3& x, const Lanes& L, V& fv) {
     if constexpr (Index::lists) {
       int count = a.near_count[i];
-      L.for_each_listed(a.near + size_t(i) * size_t(m.max_near), count < m.max_near ? count : m.max_near, grid.pos,
-                        x, fv);
+      const SceneList<Many> near =
+          SceneList<Many>::at(m, a.near, a.near16, Scenes<Many>::of(m, i), size_t(i) * size_t(m.max_near));
+      L.for_each_listed(near, count < m.max_near ? count : m.max_near, grid.pos, x, fv);
     } else if constexpr (Index::cells) {
-      L.for_each_neighbor_listing(grid, x, true, fv, nullptr, 0);
+      L.for_each_neighbor_listing(grid, x, true, fv, SlotList{nullptr}, 0);
     } else {
       all_pairs(m, g, grid, i, x, L, fv);
     }
