@@ -165,13 +165,30 @@ struct SubWarpLanes {
     return count;
   }
 
+  // The list walks take kAhead rounds of W entries at a time: every entry of them, and its
+  // neighbour's position, is loaded before the first is used, so the loads of kAhead rounds
+  // are in flight together. A particle's list is read from DRAM once a step, and one round
+  // at a time its latency, twice a round (entry, then position), bounded the walk. Each lane
+  // visits the same entries in the same order as one round at a time, and the ballots see
+  // the same rounds: the results are the same bit for bit.
+  static constexpr int kAhead = 4;
+
   template <int D, class Visitor, class List>
   __device__ void for_each_listed(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi,
                                   Visitor& visit) const {
-    for (int e = lane(); e < count; e += W) {
-      const int j = list.get(e);
-      Vec<D> d = xi - pos[j];
-      visit(j, d, norm2(d));
+    for (int b = lane(); b < count; b += kAhead * W) {
+      int j[kAhead];
+      Vec<D> xj[kAhead];
+#pragma unroll
+      for (int u = 0; u < kAhead; ++u) j[u] = b + u * W < count ? list.get(b + u * W) : -1;
+#pragma unroll
+      for (int u = 0; u < kAhead; ++u) xj[u] = j[u] >= 0 ? pos[j[u]] : xi;
+#pragma unroll
+      for (int u = 0; u < kAhead; ++u) {
+        if (j[u] < 0) break;  // this lane's entries end here (no ballot below: lanes may part)
+        Vec<D> d = xi - xj[u];
+        visit(j[u], d, norm2(d));
+      }
     }
   }
 
@@ -180,23 +197,33 @@ struct SubWarpLanes {
                                             Visitor& visit, float r2max, const List& out, int cap) const {
     const unsigned below = (1u << lane()) - 1u;
     int kept = 0;
-    for (int b = 0; b < count; b += W) {
-      const int e = b + lane();
-      bool near = false;
-      int j = 0;
-      if (e < count) {
-        j = list.get(e);
-        Vec<D> d = xi - pos[j];
-        float r2 = norm2(d);
-        visit(j, d, r2);
-        near = r2 < r2max;
+    for (int b = 0; b < count; b += kAhead * W) {
+      int j[kAhead];
+      Vec<D> xj[kAhead];
+#pragma unroll
+      for (int u = 0; u < kAhead; ++u) {
+        const int e = b + u * W + lane();
+        j[u] = e < count ? list.get(e) : -1;
       }
-      const unsigned m = group_ballot(near);
-      if (near) {
-        const int at = kept + __popc(m & below);
-        if (at < cap) out.put(at, j);
+#pragma unroll
+      for (int u = 0; u < kAhead; ++u) xj[u] = j[u] >= 0 ? pos[j[u]] : xi;
+#pragma unroll
+      for (int u = 0; u < kAhead; ++u) {
+        if (b + u * W >= count) break;  // the same for every lane of the group: the ballots stay whole
+        bool near = false;
+        if (j[u] >= 0) {
+          Vec<D> d = xi - xj[u];
+          float r2 = norm2(d);
+          visit(j[u], d, r2);
+          near = r2 < r2max;
+        }
+        const unsigned m = group_ballot(near);
+        if (near) {
+          const int at = kept + __popc(m & below);
+          if (at < cap) out.put(at, j[u]);
+        }
+        kept += __popc(m);
       }
-      kept += __popc(m);
     }
     return kept;
   }
