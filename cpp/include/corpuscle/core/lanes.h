@@ -2,6 +2,8 @@
 // runs one lane per item; CUDA runs a warp per item so neighbour loads are coalesced and
 // small particle counts still fill the GPU. A functor written against `Lanes` works for both.
 #pragma once
+#include <type_traits>
+
 #include "corpuscle/spatial/grid.h"
 
 namespace cps {
@@ -14,6 +16,13 @@ struct SlotList {
   CPS_HD int get(int e) const { return p[e]; }
   CPS_HD void put(int e, int j) const { p[e] = j; }
 };
+// no list: what a walk that keeps no near list takes for it
+struct NoList {
+  CPS_HD int get(int) const { return -1; }
+  CPS_HD void put(int, int) const {}
+};
+template <class List>
+inline constexpr bool kHasList = !std::is_same_v<List, NoList>;
 
 // one lane: the plain serial loop
 struct SingleLane {
@@ -22,17 +31,26 @@ struct SingleLane {
   CPS_HD Vec<D> sum(const Vec<D>& v) const { return v; }
   CPS_HD bool leader() const { return true; }
   // the plain cell-by-cell neighbour loop, listing the neighbours (up to cap; returns how
-  // many there were)
-  template <int D, class Visitor, class List>
+  // many there were). With a near list: those closer than sqrt(r2near) are also listed there,
+  // in the same order (up to near_cap; *kept: how many there were)
+  template <int D, class Visitor, class List, class Near = NoList>
   CPS_HD int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                       const List& list, int cap) const {
-    int count = 0;
+                                       const List& list, int cap, const Near& near = Near{}, int near_cap = 0,
+                                       float r2near = 0.0f, int* kept = nullptr) const {
+    int count = 0, nk = 0;
     auto listing = [&](int j, const Vec<D>& d, float r2) {
       if (count < cap) list.put(count, j);
       ++count;
       visit(j, d, r2);
+      if constexpr (kHasList<Near>) {
+        if (r2 < r2near) {
+          if (nk < near_cap) near.put(nk, j);
+          ++nk;
+        }
+      }
     };
     cps::for_each_neighbor(g, xi, ghosts, listing);
+    if constexpr (kHasList<Near>) *kept = nk;
     return count;
   }
   // visit every j in [begin, end) closer than sqrt(r2max) to xi (the all-pairs walk);
@@ -52,17 +70,28 @@ struct SingleLane {
     return count;
   }
   // list every j in [begin, end) closer than sqrt(r2max) to xi after the `count` already
-  // listed (up to cap), in index order; returns the new count (the true one, past cap)
-  template <int D, class List>
+  // listed (up to cap), in index order, and visit it; those closer than sqrt(r2near) also go
+  // to the near list after the *kept already there (up to near_cap). Returns the new count
+  // (the true one, past cap; *kept likewise)
+  template <int D, class List, class Visitor>
   CPS_HD int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, const List& list,
-                           int cap, int count) const {
+                           int cap, int count, Visitor& visit, const List& near, int near_cap, float r2near,
+                           int* kept) const {
+    int nk = *kept;
     for (int j = begin; j < end; ++j) {
       Vec<D> d = xi - pos[j];
-      if (norm2(d) < r2max) {
+      const float r2 = norm2(d);
+      if (r2 < r2max) {
         if (count < cap) list.put(count, j);
         ++count;
+        visit(j, d, r2);
+        if (r2 < r2near) {
+          if (nk < near_cap) near.put(nk, j);
+          ++nk;
+        }
       }
     }
+    *kept = nk;
     return count;
   }
   // visit the listed neighbours of xi
@@ -144,16 +173,21 @@ struct SubWarpLanes {
   }
 
   // SingleLane::list_in_range: W candidates a round, hits listed in index order by a ballot
-  template <int D, class List>
+  template <int D, class List, class Visitor>
   __device__ int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
-                               const List& list, int cap, int count) const {
+                               const List& list, int cap, int count, Visitor& visit, const List& near, int near_cap,
+                               float r2near, int* kept) const {
     const unsigned below = (1u << lane()) - 1u;
+    int nk = *kept;
     for (int b = begin; b < end; b += W) {
       const int j = b + lane();
       bool hit = false;
+      float r2 = 0.0f;
       if (j < end) {
         Vec<D> d = xi - pos[j];
-        hit = norm2(d) < r2max;
+        r2 = norm2(d);
+        hit = r2 < r2max;
+        if (hit) visit(j, d, r2);
       }
       const unsigned m = group_ballot(hit);
       if (hit) {
@@ -161,7 +195,15 @@ struct SubWarpLanes {
         if (at < cap) list.put(at, j);
       }
       count += __popc(m);
+      const bool close = hit && r2 < r2near;
+      const unsigned mn = group_ballot(close);
+      if (close) {
+        const int at = nk + __popc(mn & below);
+        if (at < near_cap) near.put(at, j);
+      }
+      nk += __popc(mn);
     }
+    *kept = nk;
     return count;
   }
 
@@ -229,15 +271,17 @@ struct SubWarpLanes {
   }
 
   // the cell walk in WarpLanes' order (the stencil's cells of the fluid layer, then of the
-  // ghost layer; ascending index in each), up to cap listed
-  template <int D, class Visitor, class List>
+  // ghost layer; ascending index in each), up to cap listed (and the near list as
+  // SingleLane's)
+  template <int D, class Visitor, class List, class Near = NoList>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           const List& list, int cap) const {
+                                           const List& list, int cap, const Near& near = Near{}, int near_cap = 0,
+                                           float r2near = 0.0f, int* kept = nullptr) const {
     const int nslots = kStencil<D> * (ghosts ? 2 : 1);
     int c[D];
     g.spec.cell_of(xi, c);
     const unsigned below = (1u << lane()) - 1u;
-    int count = 0;
+    int count = 0, nk = 0;
     for (int k = 0; k < nslots; ++k) {
       uint32_t slot;
       if (!stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) continue;
@@ -259,8 +303,18 @@ struct SubWarpLanes {
           visit(int(j), d, r2);
         }
         count += __popc(m);
+        if constexpr (kHasList<Near>) {
+          const bool close = hit && r2 < r2near;
+          const unsigned mn = group_ballot(close);
+          if (close) {
+            const int at = nk + __popc(mn & below);
+            if (at < near_cap) near.put(at, int(j));
+          }
+          nk += __popc(mn);
+        }
       }
     }
+    if constexpr (kHasList<Near>) *kept = nk;
     return count;
   }
 };
@@ -273,9 +327,10 @@ struct WarpLanes : SubWarpLanes<32> {
   // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
   // serial loop's order (cell by cell, ascending index: a ballot keeps lane order), up to cap;
   // returns how many there were (the same on every lane).
-  template <int D, class Visitor, class List>
+  template <int D, class Visitor, class List, class Near = NoList>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           const List& list, int cap) const {
+                                           const List& list, int cap, const Near& near = Near{}, int near_cap = 0,
+                                           float r2near = 0.0f, int* kept = nullptr) const {
     const int nslots = kStencil<D> * (ghosts ? 2 : 1);
     const int l = lane();
     int c[D];
@@ -284,7 +339,7 @@ struct WarpLanes : SubWarpLanes<32> {
     load_range(g, c, l, nslots, s0, e0);
     load_range(g, c, l + 32, nslots, s1, e1);
     const unsigned below = (1u << l) - 1u;  // lanes before this one
-    int count = 0;
+    int count = 0, nk = 0;
     for (int k = 0; k < nslots; ++k) {
       uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
       uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
@@ -305,8 +360,18 @@ struct WarpLanes : SubWarpLanes<32> {
           visit(int(j), d, r2);
         }
         count += __popc(mask);
+        if constexpr (kHasList<Near>) {
+          const bool close = hit && r2 < r2near;
+          const unsigned mn = __ballot_sync(0xffffffffu, close);
+          if (close) {
+            const int at = nk + __popc(mn & below);
+            if (at < near_cap) near.put(at, int(j));
+          }
+          nk += __popc(mn);
+        }
       }
     }
+    if constexpr (kHasList<Near>) *kept = nk;
     return count;
   }
 

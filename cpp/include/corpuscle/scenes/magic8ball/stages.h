@@ -269,12 +269,6 @@ struct ReorderStage {
   }
 };
 
-// a visitor that does nothing (a walk that only lists)
-struct NoVisit {
-  template <class V>
-  CPS_HD void operator()(int, const V&, float) const {}
-};
-
 // the index plug-ins of this kind (the registry names them)
 struct ListsIndex {
   static constexpr const char* name = "lists";
@@ -297,14 +291,19 @@ struct PairWalk {
   template <class Lanes, class V>
   CPS_HD static void density(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
                              const Vec3& x, const Lanes& L, V& v, int& count, int& kept) {
-    NoVisit none;
     if constexpr (Index::lists) {
       const int s = Scenes<Many>::of(m, i);
       const SceneList<Many> list = SceneList<Many>::at(m, a.nbr, a.nbr16, s, size_t(i) * size_t(m.max_neighbors));
-      if (!rebuilding(m, g)) count = a.nbr_count[i];
-      else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
-      else count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
       const SceneList<Many> near = SceneList<Many>::at(m, a.near, a.near16, s, size_t(i) * size_t(m.max_near));
+      if (rebuilding(m, g)) {
+        // the cell walk (or the scan) lists, sums the density and keeps the near list in one
+        // pass (the neighbours beyond h add Poly6's zero: the list walk's sum, in its order)
+        if (m.list_scan) count = list_scene(m, g, grid, i, x, L, v, list, near, kept);
+        else count = L.for_each_neighbor_listing(grid, x, true, v, list, m.max_neighbors, near, m.max_near, m.kern.h2,
+                                                 &kept);
+        return;
+      }
+      count = a.nbr_count[i];
       kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
                                           m.kern.h2, near, m.max_near);
     } else if constexpr (Index::cells) {
@@ -317,13 +316,17 @@ struct PairWalk {
   // the cell walk: the same neighbours within the list radius, in index order. For small
   // scenes (h a good part of the container radius) the 27 cells around a particle hold most
   // of its scene anyway, in many short cell ranges; the scan walks it in full rounds
-  template <class Lanes, class List>
+  // (visiting them and keeping the near list, as the cell walk does)
+  template <class Lanes, class V, class List>
   CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
-                               const Lanes& L, const List& list) {
+                               const Lanes& L, V& v, const List& list, const List& near, int& kept) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, grid.spec.h2, list,
-                                      m.max_neighbors, 0);
-    return L.list_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, grid.spec.h2, list, m.max_neighbors, count);
+    const float r2 = grid.spec.h2, r2near = m.kern.h2;
+    kept = 0;
+    const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, r2, list,
+                                      m.max_neighbors, 0, v, near, m.max_near, r2near, &kept);
+    return L.list_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, r2, list, m.max_neighbors, count, v, near,
+                           m.max_near, r2near, &kept);
   }
   // every fluid particle of i's scene, then its ghosts
   template <class Lanes, class V>
@@ -350,9 +353,10 @@ struct PairWalk {
 };
 
 // stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles,
-// copied to each particle's ghost. On rebuilds the cells are walked to list every particle
-// within the list radius; every step the list is walked for the density and its entries
-// within h are copied to a short list for the force stage.
+// copied to each particle's ghost. On rebuilds the cells are walked (or the scene scanned) to
+// list every particle within the list radius; between them the list is walked for the
+// density. Either walk copies the neighbours within h to a short list for the force stage
+// (the cell walk sums the density and keeps that list itself, in one pass).
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
