@@ -4,8 +4,8 @@
 # side, then
 #   1. the gpu tests of the files the work touched,
 #   2. the single default scene (3,500 particles), base then new, twice (must not be slower),
-#   3. the batch 4,096 x 1,000, base then new, twice; the new tree with sph.list_build=scan and
-#      with sph.skin = 0.15 and 0.1,
+#   3. the batch 4,096 x 1,000, base then new, twice; the new tree with sph.list_build=scan,
+#      sph.lanes = 4 and 16, and sph.skin = 0.15 and 0.1,
 #   4. the new tree's 16-bit lists against 32-bit ones (benchmarks/batch_lists_ab.py),
 #   5. the new tree's stage profile of the batch (ms per step over 20 eager steps).
 # Results in $OUT/fast2.log.
@@ -38,6 +38,8 @@ for r in 1 2; do
 done
 say "new, list_build=scan"
 new --particles 1000 --batch 4096 --steps 100 --repeats 3 --set sph.list_build=scan
+say "new, other lane widths (the default at this size is 8)"
+for w in 4 16; do new --particles 1000 --batch 4096 --steps 100 --repeats 3 --set sph.lanes=$w; done
 say "new, a narrower skin (relisting is cheaper now; the default is 0.2)"
 for sk in 0.15 0.1; do new --particles 1000 --batch 4096 --steps 100 --repeats 3 --set sph.skin=$sk; done
 say "16-bit against 32-bit lists (new tree)"
