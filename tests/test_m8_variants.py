@@ -5,9 +5,7 @@ results with every width, and (gpu-marked) CUDA agrees with the CPU with every w
 single scene and a batch, with every neighbour index. sph.list_build: the lists rebuilt from
 the cells or by a scan of the whole scene list the same neighbours (the same physics to float
 rounding), auto picks the scan for small scenes, and CUDA agrees with the CPU for both. A batch
-sorts 32-bit keys (segment above the cell key) where they fit, bit for bit as the 64-bit ones.
-The neighbour lists hold 16-bit scene-local slot numbers where a scene's slots fit 16 bits, bit
-for bit as 32-bit slot lists (on the CPU and, gpu-marked, on CUDA)."""
+sorts 32-bit keys (segment above the cell key) where they fit, bit for bit as the 64-bit ones."""
 import numpy as np
 import pytest
 
@@ -187,84 +185,5 @@ def test_a_batch_sorts_32_bit_keys_bit_for_bit_as_64_bit_ones(backend):
         runs.append((np.array(sim.download("position")), np.array(sim.download("id")),
                      [sim.scalars(s)["rebuilds"] for s in range(3)]))
     assert runs[0][2][0] >= 3  # the scenes relisted (and sorted) several times
-    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
-    assert runs[0][2] == runs[1][2]
-
-
-# 16-bit lists (scene-local slot numbers, the default where a scene's slots fit 16 bits)
-# against 32-bit ones (`wide_lists`, a test's switch): the same entries in the same order, so
-# bit for bit the same run on every backend. A wrong local number (a ghost's, past a scene's
-# fluid, or one of another scene) gives other neighbours and other positions.
-def _lists_runs(backend, particles, build, steps=25, wide_keys=0):
-    from corpuscle import _core
-
-    n = len(particles)
-    b = Batch.from_scene("magic8ball", n=n, backend="serial", particles=particles, seed=list(range(1, n + 1)),
-                         neighbors="lists", settle=0.0, randomize=False, shake=[],
-                         overrides={"sph.skin": 0.05, "sph.list_build": build})
-    arrays = {"position": b.field("position", copy=True), "velocity": b.field("velocity", copy=True)}
-    runs = []
-    for wide in (0, 1):
-        sim = _core.Simulation("magic8ball", backend, "lists", {**b.params, "wide_lists": wide}, arrays)
-        assert sim.scalars(0)["narrow_lists"] == 1 - wide
-        sim.step(steps)
-        runs.append((np.array(sim.download("position")), np.array(sim.download("density")),
-                     [sim.scalars(s)["rebuilds"] for s in range(n)], [sim.scalars(s)["n_ghost"] for s in range(n)]))
-    return runs
-
-
-@pytest.mark.parametrize("build", ["cells", "scan"])
-@pytest.mark.parametrize("particles", [[260, 200, 260], [300]])
-def test_16_bit_lists_run_bit_for_bit_as_32_bit_ones(particles, build):
-    narrow, wide = _lists_runs("serial", particles, build)
-    assert wide[2][0] >= 3 and min(wide[3]) > 0  # the scenes relisted, with ghosts in their lists
-    assert np.array_equal(narrow[0], wide[0]) and np.array_equal(narrow[1], wide[1])
-    assert narrow[2] == wide[2]
-
-
-@pytest.mark.gpu
-@cuda
-@pytest.mark.parametrize("build", ["cells", "scan"])
-def test_cuda_16_bit_lists_run_bit_for_bit_as_32_bit_ones(build):
-    narrow, wide = _lists_runs("cuda", [260, 200, 260, 230], build)
-    assert wide[2][0] >= 3
-    assert np.array_equal(narrow[0], wide[0]) and np.array_equal(narrow[1], wide[1])
-    assert narrow[2] == wide[2]
-
-
-def test_lists_are_16_bit_up_to_32768_particles_a_scene():
-    from corpuscle import _core
-
-    b = Batch.from_scene("magic8ball", n=2, backend="serial", particles=200, neighbors="lists", settle=0.0,
-                         randomize=False, shake=[])
-    rng = np.random.default_rng(1)
-    for n_fluid, narrow in ((32768, 1), (32769, 0)):
-        x = (rng.random((2 * n_fluid, 3), dtype=np.float32) - 0.5) * 0.01
-        params = {**b.params, "n_fluid": n_fluid, "max_neighbors": 32, "max_near": 32}
-        sim = _core.Simulation("magic8ball", "serial", "lists", params, {"position": x, "velocity": 0 * x})
-        assert sim.scalars(0)["narrow_lists"] == narrow
-
-
-# A batch with 32-bit keys sorts only the segments (a scene's fluid or ghosts) whose scene
-# rebuilds, each by its cell keys (CUDA: a block a segment, sized to it); the 64-bit keys take
-# the sort of every segment at once. The same order, so bit for bit the same run, for segments
-# that take each of CUDA's block sizes (up to 1,024 slots: the test above; 2,048, 4,096, 8,192).
-@pytest.mark.parametrize("backend", [
-    "serial", pytest.param("cuda", marks=[pytest.mark.gpu, cuda])])
-@pytest.mark.parametrize("particles", [[1500, 1200], [3000, 2900], [5000, 4600]])
-def test_the_segment_sort_runs_bit_for_bit_as_the_sort_of_every_segment(backend, particles):
-    from corpuscle import _core
-
-    n = len(particles)
-    b = Batch.from_scene("magic8ball", n=n, backend="serial", particles=particles, seed=[4, 5], neighbors="lists",
-                         settle=0.0, randomize=False, shake=[], overrides={"sph.skin": 0.05})
-    arrays = {"position": b.field("position", copy=True), "velocity": b.field("velocity", copy=True)}
-    runs = []
-    for wide in (0, 1):
-        sim = _core.Simulation("magic8ball", backend, "lists", {**b.params, "wide_keys": wide}, arrays)
-        sim.step(6)
-        runs.append((np.array(sim.download("position")), np.array(sim.download("id")),
-                     [sim.scalars(s)["rebuilds"] for s in range(n)]))
-    assert min(runs[0][2]) >= 2  # sorted more than once
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
     assert runs[0][2] == runs[1][2]

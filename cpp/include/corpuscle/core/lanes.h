@@ -3,27 +3,10 @@
 // small particle counts still fill the GPU. A functor written against `Lanes` works for both.
 #pragma once
 #include <cstring>
-#include <type_traits>
 
 #include "corpuscle/spatial/grid.h"
 
 namespace cps {
-
-// A list of slot indices as the lanes write and read it: `put(e, j)` stores slot j as entry
-// e, `get(e)` gives it back. This one stores them as they are; a stage may pass a type of its
-// own with the same two members (one that stores them narrower, say).
-struct SlotList {
-  int* p;
-  CPS_HD int get(int e) const { return p[e]; }
-  CPS_HD void put(int e, int j) const { p[e] = j; }
-};
-// no list: what a walk that keeps no near list takes for it
-struct NoList {
-  CPS_HD int get(int) const { return -1; }
-  CPS_HD void put(int, int) const {}
-};
-template <class List>
-inline constexpr bool kHasList = !std::is_same_v<List, NoList>;
 
 // one lane: the plain serial loop
 struct SingleLane {
@@ -32,26 +15,17 @@ struct SingleLane {
   CPS_HD Vec<D> sum(const Vec<D>& v) const { return v; }
   CPS_HD bool leader() const { return true; }
   // the plain cell-by-cell neighbour loop, listing the neighbours (up to cap; returns how
-  // many there were). With a near list: those closer than sqrt(r2near) are also listed there,
-  // in the same order (up to near_cap; *kept: how many there were)
-  template <int D, class Visitor, class List, class Near = NoList>
+  // many there were)
+  template <int D, class Visitor>
   CPS_HD int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                       const List& list, int cap, const Near& near = Near{}, int near_cap = 0,
-                                       float r2near = 0.0f, int* kept = nullptr) const {
-    int count = 0, nk = 0;
+                                       int* list, int cap) const {
+    int count = 0;
     auto listing = [&](int j, const Vec<D>& d, float r2) {
-      if (count < cap) list.put(count, j);
+      if (count < cap) list[count] = j;
       ++count;
       visit(j, d, r2);
-      if constexpr (kHasList<Near>) {
-        if (r2 < r2near) {
-          if (nk < near_cap) near.put(nk, j);
-          ++nk;
-        }
-      }
     };
     cps::for_each_neighbor(g, xi, ghosts, listing);
-    if constexpr (kHasList<Near>) *kept = nk;
     return count;
   }
   // visit every j in [begin, end) closer than sqrt(r2max) to xi (the all-pairs walk);
@@ -71,52 +45,41 @@ struct SingleLane {
     return count;
   }
   // list every j in [begin, end) closer than sqrt(r2max) to xi after the `count` already
-  // listed (up to cap), in index order, and visit it; those closer than sqrt(r2near) also go
-  // to the near list after the *kept already there (up to near_cap). Returns the new count
-  // (the true one, past cap; *kept likewise)
-  template <int D, class List, class Visitor>
-  CPS_HD int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, const List& list,
-                           int cap, int count, Visitor& visit, const List& near, int near_cap, float r2near,
-                           int* kept) const {
-    int nk = *kept;
+  // listed (up to cap), in index order; returns the new count (the true one, past cap)
+  template <int D>
+  CPS_HD int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list, int cap,
+                           int count) const {
     for (int j = begin; j < end; ++j) {
       Vec<D> d = xi - pos[j];
-      const float r2 = norm2(d);
-      if (r2 < r2max) {
-        if (count < cap) list.put(count, j);
+      if (norm2(d) < r2max) {
+        if (count < cap) list[count] = j;
         ++count;
-        visit(j, d, r2);
-        if (r2 < r2near) {
-          if (nk < near_cap) near.put(nk, j);
-          ++nk;
-        }
       }
     }
-    *kept = nk;
     return count;
   }
   // visit the listed neighbours of xi
-  template <int D, class Visitor, class List>
-  CPS_HD void for_each_listed(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) const {
+  template <int D, class Visitor>
+  CPS_HD void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) const {
     for (int e = 0; e < count; ++e) {
-      const int j = list.get(e);
+      const int j = list[e];
       Vec<D> d = xi - pos[j];
       visit(j, d, norm2(d));
     }
   }
   // visit the listed neighbours of xi and copy those closer than sqrt(r2max) to `out`, in
   // order (up to cap); returns how many there were
-  template <int D, class Visitor, class List>
-  CPS_HD int for_each_listed_compacting(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi,
-                                        Visitor& visit, float r2max, const List& out, int cap) const {
+  template <int D, class Visitor>
+  CPS_HD int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                        Visitor& visit, float r2max, int* out, int cap) const {
     int kept = 0;
     for (int e = 0; e < count; ++e) {
-      const int j = list.get(e);
+      const int j = list[e];
       Vec<D> d = xi - pos[j];
       float r2 = norm2(d);
       visit(j, d, r2);
       if (r2 < r2max) {
-        if (kept < cap) out.put(kept, j);
+        if (kept < cap) out[kept] = j;
         ++kept;
       }
     }
@@ -187,159 +150,95 @@ struct SubWarpLanes {
   }
 
   // SingleLane::list_in_range: W candidates a round, hits listed in index order by a ballot
-  template <int D, class List, class Visitor>
-  __device__ int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
-                               const List& list, int cap, int count, Visitor& visit, const List& near, int near_cap,
-                               float r2near, int* kept) const {
+  template <int D>
+  __device__ int list_in_range(const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list,
+                               int cap, int count) const {
     const unsigned below = (1u << lane()) - 1u;
-    int nk = *kept;
     for (int b = begin; b < end; b += W) {
       const int j = b + lane();
       bool hit = false;
-      float r2 = 0.0f;
       if (j < end) {
         Vec<D> d = xi - pos[j];
-        r2 = norm2(d);
-        hit = r2 < r2max;
-        if (hit) visit(j, d, r2);
+        hit = norm2(d) < r2max;
       }
       const unsigned m = group_ballot(hit);
       if (hit) {
         const int at = count + __popc(m & below);
-        if (at < cap) list.put(at, j);
+        if (at < cap) list[at] = j;
       }
       count += __popc(m);
-      const bool close = hit && r2 < r2near;
-      const unsigned mn = group_ballot(close);
-      if (close) {
-        const int at = nk + __popc(mn & below);
-        if (at < near_cap) near.put(at, j);
-      }
-      nk += __popc(mn);
     }
-    *kept = nk;
     return count;
   }
 
-  // The list walks take kAhead rounds of W entries at a time: every entry of them, and its
-  // neighbour's position, is loaded before the first is used, so the loads of kAhead rounds
-  // are in flight together. A particle's list is read from DRAM once a step, and one round
-  // at a time its latency, twice a round (entry, then position), bounded the walk. Each lane
-  // visits the same entries in the same order as one round at a time, and the ballots see
-  // the same rounds: the results are the same bit for bit.
-  static constexpr int kAhead = 4;
-
-  template <int D, class Visitor, class List>
-  __device__ void for_each_listed(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi,
+  template <int D, class Visitor>
+  __device__ void for_each_listed(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
                                   Visitor& visit) const {
-    for (int b = lane(); b < count; b += kAhead * W) {
-      int j[kAhead];
-      Vec<D> xj[kAhead];
-#pragma unroll
-      for (int u = 0; u < kAhead; ++u) j[u] = b + u * W < count ? list.get(b + u * W) : -1;
-#pragma unroll
-      for (int u = 0; u < kAhead; ++u) xj[u] = j[u] >= 0 ? pos[j[u]] : xi;
-#pragma unroll
-      for (int u = 0; u < kAhead; ++u) {
-        if (j[u] < 0) break;  // this lane's entries end here (no ballot below: lanes may part)
-        Vec<D> d = xi - xj[u];
-        visit(j[u], d, norm2(d));
-      }
+    for (int e = lane(); e < count; e += W) {
+      const int j = list[e];
+      Vec<D> d = xi - pos[j];
+      visit(j, d, norm2(d));
     }
   }
 
-  template <int D, class Visitor, class List>
-  __device__ int for_each_listed_compacting(const List& list, int count, const Vec<D>* pos, const Vec<D>& xi,
-                                            Visitor& visit, float r2max, const List& out, int cap) const {
+  template <int D, class Visitor>
+  __device__ int for_each_listed_compacting(const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                            Visitor& visit, float r2max, int* out, int cap) const {
     const unsigned below = (1u << lane()) - 1u;
     int kept = 0;
-    for (int b = 0; b < count; b += kAhead * W) {
-      int j[kAhead];
-      Vec<D> xj[kAhead];
-#pragma unroll
-      for (int u = 0; u < kAhead; ++u) {
-        const int e = b + u * W + lane();
-        j[u] = e < count ? list.get(e) : -1;
+    for (int b = 0; b < count; b += W) {
+      const int e = b + lane();
+      bool near = false;
+      if (e < count) {
+        const int j = list[e];
+        Vec<D> d = xi - pos[j];
+        float r2 = norm2(d);
+        visit(j, d, r2);
+        near = r2 < r2max;
       }
-#pragma unroll
-      for (int u = 0; u < kAhead; ++u) xj[u] = j[u] >= 0 ? pos[j[u]] : xi;
-#pragma unroll
-      for (int u = 0; u < kAhead; ++u) {
-        if (b + u * W >= count) break;  // the same for every lane of the group: the ballots stay whole
-        bool near = false;
-        if (j[u] >= 0) {
-          Vec<D> d = xi - xj[u];
-          float r2 = norm2(d);
-          visit(j[u], d, r2);
-          near = r2 < r2max;
-        }
-        const unsigned m = group_ballot(near);
-        if (near) {
-          const int at = kept + __popc(m & below);
-          if (at < cap) out.put(at, j[u]);
-        }
-        kept += __popc(m);
+      const unsigned m = group_ballot(near);
+      if (near) {
+        const int at = kept + __popc(m & below);
+        if (at < cap) out[at] = list[e];
       }
+      kept += __popc(m);
     }
     return kept;
   }
 
   // the cell walk in WarpLanes' order (the stencil's cells of the fluid layer, then of the
-  // ghost layer; ascending index in each), up to cap listed (and the near list as
-  // SingleLane's). As WarpLanes, the lanes load the ranges of W stencil cells at once (lane
-  // l: cell k0 + l) and walk them with the ranges broadcast by shuffles
-  template <int D, class Visitor, class List, class Near = NoList>
+  // ghost layer; ascending index in each), up to cap listed
+  template <int D, class Visitor>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           const List& list, int cap, const Near& near = Near{}, int near_cap = 0,
-                                           float r2near = 0.0f, int* kept = nullptr) const {
+                                           int* list, int cap) const {
     const int nslots = kStencil<D> * (ghosts ? 2 : 1);
     int c[D];
     g.spec.cell_of(xi, c);
     const unsigned below = (1u << lane()) - 1u;
-    int count = 0, nk = 0;
-    for (int k0 = 0; k0 < nslots; k0 += W) {
-      uint32_t sl = 0, el = 0;  // the range of stencil cell k0 + lane (empty outside the grid)
-      {
-        const int k = k0 + lane();
-        uint32_t slot;
-        if (k < nslots && stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) {
-          sl = g.cell_start[slot];
-          el = g.cell_end[slot];
+    int count = 0;
+    for (int k = 0; k < nslots; ++k) {
+      uint32_t slot;
+      if (!stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) continue;
+      const uint32_t s = g.cell_start[slot], e = g.cell_end[slot];
+      for (uint32_t b = s; b < e; b += uint32_t(W)) {
+        const uint32_t j = b + uint32_t(lane());
+        Vec<D> d = Vec<D>::zero();
+        float r2 = 0.0f;
+        bool hit = false;
+        if (j < e) {
+          d = xi - g.pos[j];
+          r2 = norm2(d);
+          hit = r2 < g.spec.h2;
         }
-      }
-      const int kn = nslots - k0 < W ? nslots - k0 : W;
-      for (int q = 0; q < kn; ++q) {
-        const uint32_t s = __shfl_sync(mask(), sl, q, W), e = __shfl_sync(mask(), el, q, W);
-        for (uint32_t b = s; b < e; b += uint32_t(W)) {
-          const uint32_t j = b + uint32_t(lane());
-          Vec<D> d = Vec<D>::zero();
-          float r2 = 0.0f;
-          bool hit = false;
-          if (j < e) {
-            d = xi - g.pos[j];
-            r2 = norm2(d);
-            hit = r2 < g.spec.h2;
-          }
-          const unsigned m = group_ballot(hit);
-          if (hit) {
-            const int at = count + __popc(m & below);
-            if (at < cap) list.put(at, int(j));
-            visit(int(j), d, r2);
-          }
-          count += __popc(m);
-          if constexpr (kHasList<Near>) {
-            const bool close = hit && r2 < r2near;
-            const unsigned mn = group_ballot(close);
-            if (close) {
-              const int at = nk + __popc(mn & below);
-              if (at < near_cap) near.put(at, int(j));
-            }
-            nk += __popc(mn);
-          }
+        const unsigned m = group_ballot(hit);
+        if (hit) {
+          const int at = count + __popc(m & below);
+          if (at < cap) list[at] = int(j);
+          visit(int(j), d, r2);
         }
+        count += __popc(m);
       }
     }
-    if constexpr (kHasList<Near>) *kept = nk;
     return count;
   }
 };
@@ -352,10 +251,9 @@ struct WarpLanes : SubWarpLanes<32> {
   // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
   // serial loop's order (cell by cell, ascending index: a ballot keeps lane order), up to cap;
   // returns how many there were (the same on every lane).
-  template <int D, class Visitor, class List, class Near = NoList>
+  template <int D, class Visitor>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           const List& list, int cap, const Near& near = Near{}, int near_cap = 0,
-                                           float r2near = 0.0f, int* kept = nullptr) const {
+                                           int* list, int cap) const {
     const int nslots = kStencil<D> * (ghosts ? 2 : 1);
     const int l = lane();
     int c[D];
@@ -364,7 +262,7 @@ struct WarpLanes : SubWarpLanes<32> {
     load_range(g, c, l, nslots, s0, e0);
     load_range(g, c, l + 32, nslots, s1, e1);
     const unsigned below = (1u << l) - 1u;  // lanes before this one
-    int count = 0, nk = 0;
+    int count = 0;
     for (int k = 0; k < nslots; ++k) {
       uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
       uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
@@ -381,22 +279,12 @@ struct WarpLanes : SubWarpLanes<32> {
         const unsigned mask = __ballot_sync(0xffffffffu, hit);
         if (hit) {
           const int at = count + __popc(mask & below);
-          if (at < cap) list.put(at, int(j));
+          if (at < cap) list[at] = int(j);
           visit(int(j), d, r2);
         }
         count += __popc(mask);
-        if constexpr (kHasList<Near>) {
-          const bool close = hit && r2 < r2near;
-          const unsigned mn = __ballot_sync(0xffffffffu, close);
-          if (close) {
-            const int at = nk + __popc(mn & below);
-            if (at < near_cap) near.put(at, int(j));
-          }
-          nk += __popc(mn);
-        }
       }
     }
-    if constexpr (kHasList<Near>) *kept = nk;
     return count;
   }
 

@@ -31,9 +31,6 @@ inline int auto_lanes(const Model& m) {
 constexpr int kScanSlots = 500;
 inline int auto_list_scan(const Model& m) { return m.n_fluid <= kScanSlots ? 1 : 0; }
 
-// the slots of one scene (fluid and ghosts) that 16-bit list entries can number
-constexpr long long kNarrowSlots = 1LL << 16;
-
 inline Model build_model(const ParamSource& p) {
   Model m{};
   m.n_fluid = int(p.integer("n_fluid"));
@@ -51,9 +48,6 @@ inline Model build_model(const ParamSource& p) {
   m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
   if (m.lanes == 0) m.lanes = auto_lanes(m);
   m.wide_keys = p.has("wide_keys") && p.integer("wide_keys") != 0 ? 1 : 0;
-  // 16-bit lists where every scene's slots (fluid and ghosts) fit 16 bits; `wide_lists` (a
-  // test's switch) keeps 32-bit ones
-  m.narrow_lists = !(p.has("wide_lists") && p.integer("wide_lists") != 0) && 2LL * m.n_fluid <= kNarrowSlots ? 1 : 0;
   m.list_scan = p.has("list_scan") ? int(p.integer("list_scan")) : -1;
   if (m.list_scan < 0) m.list_scan = auto_list_scan(m);
   if (m.list_scan > 1) throw Error("magic8ball: list_scan must be 0 (cells), 1 (scan) or -1 (automatic)");

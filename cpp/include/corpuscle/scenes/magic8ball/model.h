@@ -34,7 +34,6 @@ struct Model {
   int lanes;             // CUDA lanes per particle in the pair stages: 32 (a warp), 16, 8 or 4 (the CPU: one)
   int list_scan;         // lists: rebuilt by a scan of each particle's whole scene (1) or the cell walk (0)
   int wide_keys;         // a batch sorts 64-bit keys even where 32-bit ones hold them (a test's switch)
-  int narrow_lists;      // lists hold 16-bit slot numbers local to a scene (2 n_fluid <= 65536), else 32-bit slots
   double max_list_bytes; // the lists may grow to this on overflow (0: what the backend has free)
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float skin_distance;   // list_radius - h: how far pairs may close in before the lists are stale (0: every step)
@@ -149,7 +148,6 @@ struct Arrays {
   StepSums* items;
   int *nbr, *nbr_count;  // neighbour lists within the list radius (max_neighbors per fluid particle)
   int *near, *near_count;  // this step's neighbours within h (max_near per particle), for the forces
-  uint16_t *nbr16, *near16;  // the same lists as scene-local 16-bit slot numbers (Model::narrow_lists)
   uint32_t *cell_start, *cell_end;
 };
 

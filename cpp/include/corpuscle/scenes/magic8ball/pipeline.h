@@ -36,14 +36,12 @@ class Pipeline {
   // element counts of the buffers, for the allocation and the estimate before it
   static size_t list_slots(const Model& m) { return Index::lists ? size_t(total_fluid(m)) * size_t(m.max_neighbors) : 0; }
   static size_t near_slots(const Model& m) { return Index::lists ? size_t(total_fluid(m)) * size_t(m.max_near) : 0; }
-  // the bytes of a list entry: 16-bit scene-local numbers, or 32-bit slots
-  static double entry_bytes(const Model& m) { return m.narrow_lists ? sizeof(uint16_t) : sizeof(int); }
   static double bytes_needed(const Model& m) {
     const double n = total_fluid(m), cap = 2.0 * n;
     const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + sizeof(ForceTerms) +
                             2 * sizeof(uint32_t) + 2 * sizeof(int);
     const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int);
-    const double lists = entry_bytes(m) * (double(list_slots(m)) + double(near_slots(m)));
+    const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
     const double cells = 2.0 * double(cells_per_scene(m)) * double(m.n_scenes) * sizeof(uint32_t);
     const double sort_scratch = cap * (sizeof(uint32_t) + sizeof(int)) * 2.0;
     const double batch = m.n_scenes > 1 ? (narrow_key_bits(m) ? 0.0 : cap * 2.0 * sizeof(uint64_t)) +
@@ -93,8 +91,9 @@ class Pipeline {
     acc_.resize(n);
     xsph_.resize(n);
     items_.resize(n);
-    resize_lists();
+    nbr_.resize(list_slots(m));
     nbr_count_.resize(n);
+    near_.resize(near_slots(m));
     near_count_.resize(n);
     cells_start_.resize(cells_per_scene(m) * size_t(m.n_scenes));
     cells_end_.resize(cells_per_scene(m) * size_t(m.n_scenes));
@@ -151,11 +150,12 @@ class Pipeline {
       m.max_near = grown(m_.max_near, *std::max_element(kept.begin(), kept.end()));
       if (m.max_neighbors == m_.max_neighbors && m.max_near == m_.max_near) return false;
       if (bytes_needed(m) - bytes_needed(m_) > bytes_free) return false;
-      const double list_bytes = entry_bytes(m) * (double(list_slots(m)) + double(near_slots(m)));
+      const double list_bytes = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
       if (m_.max_list_bytes > 0.0 && list_bytes > m_.max_list_bytes) return false;
       m_ = m;
       ex_.to_device(model_.data(), &m_, sizeof(Model));
-      resize_lists();
+      nbr_.resize(list_slots(m_));
+      near_.resize(near_slots(m_));
       invalidate(false);  // every scene sorts and relists
       for (Scene& r : recs)
         if (r.clock.bad == kBadNeighbors) {  // the step was not taken: it is repeated
@@ -215,28 +215,19 @@ class Pipeline {
     Arrays a = arrays(cur, nxt);
     // 1. keys come from the last step's integration (or prepare)
     // 2. sort by key (when rebuilding), then reorder into the other buffers (ghosts built
-    //    there, cell ranges) or carry the arrays over; a batch sorts the segments of the
-    //    scenes that rebuild (or, where a segment is too long for that or the keys need 64
-    //    bits, every scene's segments at once, each scene that does not rebuild keeping its
-    //    order)
+    //    there, cell ranges) or carry the arrays over; a batch sorts every scene's segments
+    //    at once, each scene that does not rebuild keeping its order
     if constexpr (!Many) {
       ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{md, g},
                     ReorderStage<Many>{md, g, a});
     } else {
       a.key_low_bits = key_low_bits_;
-      if (key_low_bits_ && Exec::segment_sort_fits(m.n_fluid)) {
-        // each segment (a scene's fluid or ghosts) by its cell keys where its scene rebuilds,
-        // the others left as they are, then the reorder (CUDA: a block a segment, one kernel)
-        ex_.sort_segments_then(a.keys, a.keys_sorted, a.idx, a.perm, 2 * B, m.n_fluid, key_low_bits_,
-                               SegmentRebuilds{md, g}, ReorderStage<Many>{md, g, a});
-      } else {
-        ex_.for_each(cap, SelectKeysStage{md, g, a});
-        if (key_low_bits_)
-          ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, key_low_bits_ + segment_bits(m));
-        else
-          ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + segment_bits(m));
-        ex_.for_each(cap, ReorderStage<Many>{md, g, a});
-      }
+      ex_.for_each(cap, SelectKeysStage{md, g, a});
+      if (key_low_bits_)
+        ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, key_low_bits_ + segment_bits(m));
+      else
+        ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + segment_bits(m));
+      ex_.for_each(cap, ReorderStage<Many>{md, g, a});
     }
     ex_.mark(0);
     // from here on the sorted arrays are current
@@ -274,15 +265,6 @@ class Pipeline {
       }
       ex_.mark(2);
     }
-  }
-
-  // the lists at the model's capacities, in the width it chose (the other width's buffers empty)
-  void resize_lists() {
-    const bool narrow = m_.narrow_lists != 0;
-    nbr_.resize(narrow ? 0 : list_slots(m_));
-    near_.resize(narrow ? 0 : near_slots(m_));
-    nbr16_.resize(narrow ? list_slots(m_) : 0);
-    near16_.resize(narrow ? near_slots(m_) : 0);
   }
 
   // a pair stage with the model's lanes per particle (CUDA: a warp, or groups of 16, 8 or 4
@@ -392,7 +374,6 @@ class Pipeline {
             {"max_near", double(m_.max_near)},
             {"lanes", double(m_.lanes)},  // CUDA lanes per particle in the pair stages
             {"list_scan", double(m_.list_scan)},  // lists rebuilt by a scan of the scene (1) or the cells (0)
-            {"narrow_lists", double(m_.narrow_lists)},  // list entries of 16 bits (1) or 32 (0)
             {"die_angular_velocity_x", double(w[0])},
             {"die_angular_velocity_y", double(w[1])},
             {"die_angular_velocity_z", double(w[2])}};
@@ -424,8 +405,6 @@ class Pipeline {
     a.nbr_count = nbr_count_.data();
     a.near = near_.data();
     a.near_count = near_count_.data();
-    a.nbr16 = nbr16_.data();
-    a.near16 = near16_.data();
     a.cell_start = cells_start_.data();
     a.cell_end = cells_end_.data();
     a.keys64 = keys64_.data();
@@ -449,7 +428,6 @@ class Pipeline {
   Buf<Vec3> acc_, xsph_;
   Buf<StepSums> items_;
   Buf<int> nbr_, nbr_count_, near_, near_count_;
-  Buf<uint16_t> nbr16_, near16_;  // the lists as 16-bit scene-local numbers (Model::narrow_lists)
   Buf<uint32_t> cells_start_, cells_end_;
   Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort (64-bit keys)
   int key_low_bits_ = 0;                  // a batch's keys are 32-bit (narrow_key_bits), or 64-bit (0)

@@ -50,38 +50,6 @@ struct Scenes {
   }
 };
 
-// A particle's list of neighbour slots (lanes.h's SlotList protocol): 32-bit slot indices, or,
-// where Model::narrow_lists, 16-bit numbers local to the scene (they halve the lists' memory
-// traffic): fluid slot s n + l as l, ghost slot N + s n + l as n + l (a single run's local
-// number is its slot). Every entry is a slot of the particle's own scene: a pair never
-// crosses scenes.
-template <bool Many>
-struct SceneList {
-  int* wide;
-  uint16_t* narrow;  // used when not null
-  int first;         // the scene's first fluid slot (s n)
-  int n;             // fluid slots a scene
-  int shift;         // N - n: the slot of local ghost number n + l is first + shift + n + l
-  CPS_HD static SceneList at(const Model& m, int* wide, uint16_t* narrow, int s, size_t offset) {
-    const int n = m.n_fluid;
-    return SceneList{m.narrow_lists ? nullptr : wide + offset, m.narrow_lists ? narrow + offset : nullptr,
-                     Many ? s * n : 0, n, Many ? Scenes<Many>::fluid(m) - n : 0};
-  }
-  CPS_HD int get(int e) const {
-    if (!narrow) return wide[e];
-    const int l = narrow[e];
-    return first + l + (l < n ? 0 : shift);
-  }
-  CPS_HD void put(int e, int j) const {
-    if (!narrow) {
-      wide[e] = j;
-      return;
-    }
-    const int l = j - first;
-    narrow[e] = uint16_t(l < n ? l : l - shift);
-  }
-};
-
 // whether fluid slot i holds a particle: a scene of n_active particles uses the first n_active
 // slots of its range (a single scene all of them)
 CPS_HD CPS_INLINE bool active_slot(const Model& m, const Scene* g, int i) {
@@ -202,20 +170,6 @@ struct SelectKeysStage {
   }
 };
 
-// whether segment `seg` of a batch's segmented sort (slots [seg n, (seg + 1) n): the fluid of
-// scene seg, or for seg >= n_scenes the ghosts of scene seg - n_scenes) is sorted: its scene
-// rebuilds this step. Sorted by the cell keys alone, each segment gets the order the sort of
-// every segment at once (SelectKeysStage) gives it; a segment not sorted keeps its order, and
-// the reorder then reads neither its sorted keys nor its permutation
-struct SegmentRebuilds {
-  const Model* model;
-  const Scene* g;
-  CPS_HD bool operator()(int seg) const {
-    const Scene* gs = g + seg % model->n_scenes;
-    return rebuilding(*model, gs) && !halted(gs);
-  }
-};
-
 // the sorted cell key of slot j (a batch's: the low half of its 64-bit key)
 template <bool Many>
 CPS_HD CPS_INLINE uint32_t sorted_key(const Arrays& a, int j) {
@@ -283,6 +237,12 @@ struct ReorderStage {
   }
 };
 
+// a visitor that does nothing (a walk that only lists)
+struct NoVisit {
+  template <class V>
+  CPS_HD void operator()(int, const V&, float) const {}
+};
+
 // the index plug-ins of this kind (the registry names them)
 struct ListsIndex {
   static constexpr const char* name = "lists";
@@ -305,23 +265,17 @@ struct PairWalk {
   template <class Lanes, class V>
   CPS_HD static void density(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
                              const Vec3& x, const Lanes& L, V& v, int& count, int& kept) {
+    NoVisit none;
     if constexpr (Index::lists) {
-      const int s = Scenes<Many>::of(m, i);
-      const SceneList<Many> list = SceneList<Many>::at(m, a.nbr, a.nbr16, s, size_t(i) * size_t(m.max_neighbors));
-      const SceneList<Many> near = SceneList<Many>::at(m, a.near, a.near16, s, size_t(i) * size_t(m.max_near));
-      if (rebuilding(m, g)) {
-        // the cell walk (or the scan) lists, sums the density and keeps the near list in one
-        // pass (the neighbours beyond h add Poly6's zero: the list walk's sum, in its order)
-        if (m.list_scan) count = list_scene(m, g, grid, i, x, L, v, list, near, kept);
-        else count = L.for_each_neighbor_listing(grid, x, true, v, list, m.max_neighbors, near, m.max_near, m.kern.h2,
-                                                 &kept);
-        return;
-      }
-      count = a.nbr_count[i];
+      int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
+      if (!rebuilding(m, g)) count = a.nbr_count[i];
+      else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
+      else count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
+      int* near = a.near + size_t(i) * size_t(m.max_near);
       kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
                                           m.kern.h2, near, m.max_near);
     } else if constexpr (Index::cells) {
-      kept = count = L.for_each_neighbor_listing(grid, x, true, v, SlotList{nullptr}, 0);
+      kept = count = L.for_each_neighbor_listing(grid, x, true, v, nullptr, 0);
     } else {
       kept = count = all_pairs(m, g, grid, i, x, L, v);
     }
@@ -330,17 +284,13 @@ struct PairWalk {
   // the cell walk: the same neighbours within the list radius, in index order. For small
   // scenes (h a good part of the container radius) the 27 cells around a particle hold most
   // of its scene anyway, in many short cell ranges; the scan walks it in full rounds
-  // (visiting them and keeping the near list, as the cell walk does)
-  template <class Lanes, class V, class List>
+  template <class Lanes>
   CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
-                               const Lanes& L, V& v, const List& list, const List& near, int& kept) {
+                               const Lanes& L, int* list) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    const float r2 = grid.spec.h2, r2near = m.kern.h2;
-    kept = 0;
-    const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, r2, list,
-                                      m.max_neighbors, 0, v, near, m.max_near, r2near, &kept);
-    return L.list_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, r2, list, m.max_neighbors, count, v, near,
-                           m.max_near, r2near, &kept);
+    const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, grid.spec.h2, list,
+                                      m.max_neighbors, 0);
+    return L.list_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, grid.spec.h2, list, m.max_neighbors, count);
   }
   // every fluid particle of i's scene, then its ghosts
   template <class Lanes, class V>
@@ -355,11 +305,10 @@ struct PairWalk {
                             const Vec3& x, const Lanes& L, V& fv) {
     if constexpr (Index::lists) {
       int count = a.near_count[i];
-      const SceneList<Many> near =
-          SceneList<Many>::at(m, a.near, a.near16, Scenes<Many>::of(m, i), size_t(i) * size_t(m.max_near));
-      L.for_each_listed(near, count < m.max_near ? count : m.max_near, grid.pos, x, fv);
+      L.for_each_listed(a.near + size_t(i) * size_t(m.max_near), count < m.max_near ? count : m.max_near, grid.pos,
+                        x, fv);
     } else if constexpr (Index::cells) {
-      L.for_each_neighbor_listing(grid, x, true, fv, SlotList{nullptr}, 0);
+      L.for_each_neighbor_listing(grid, x, true, fv, nullptr, 0);
     } else {
       all_pairs(m, g, grid, i, x, L, fv);
     }
@@ -367,10 +316,9 @@ struct PairWalk {
 };
 
 // stage 3: density (Poly6 over fluid and ghosts) and Tait pressure of fluid particles,
-// copied to each particle's ghost. On rebuilds the cells are walked (or the scene scanned) to
-// list every particle within the list radius; between them the list is walked for the
-// density. Either walk copies the neighbours within h to a short list for the force stage
-// (the cell walk sums the density and keeps that list itself, in one pass).
+// copied to each particle's ghost. On rebuilds the cells are walked to list every particle
+// within the list radius; every step the list is walked for the density and its entries
+// within h are copied to a short list for the force stage.
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
