@@ -71,17 +71,22 @@ struct DamBreak2Kind {
 };
 
 // the `lists` pair pass's lanes per particle when the scene does not say (sph.lanes = 0): the
-// CPU one; CUDA kListLanes (a warp then spans 32 / kListLanes neighbouring particles, whose
-// neighbours' data the multiprocessor's L1 holds for all of them), or kSmallListLanes for
-// fewer than kSmallListParticles fluid particles (more threads for a small state). Not yet
-// measured against a thread per particle: the commands are in docs/benchmarks.md.
-constexpr int kListLanes = 4;
-constexpr int kSmallListLanes = 8;
-constexpr int kSmallListParticles = 1 << 16;
+// CPU one; CUDA enough lanes (a power of two, at most kMaxAutoListLanes) that lanes x fluid
+// particles reach kListThreads, about four waves of the GPU's resident threads. H200,
+// 2026-12-02 (docs/benchmarks.md): 129,600 particles 1,499 / 1,581 / 1,688 / 1,733 steps/s at
+// 1 / 2 / 4 / 8 lanes; 1,056,321 particles 303 / 274 / 277 / 261: more lanes pay only while one
+// lane a particle would leave the GPU short of threads.
+constexpr int kMaxAutoListLanes = 8;
+constexpr long long kListThreads = 1LL << 20;
 template <class Exec>
 inline int auto_list_lanes(int n_fluid) {
-  if constexpr (!Exec::on_device) return 1;
-  else return n_fluid < kSmallListParticles ? kSmallListLanes : kListLanes;
+  if constexpr (!Exec::on_device) {
+    return 1;
+  } else {
+    int g = 1;
+    while (g < kMaxAutoListLanes && (long long)g * n_fluid < kListThreads) g *= 2;
+    return g;
+  }
 }
 
 constexpr int kAllPairsTile = 128;
