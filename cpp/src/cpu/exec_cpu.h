@@ -160,15 +160,16 @@ struct CpuExec {
     for_each(n, f);
   }
 
-  // reduce in[0, n) with op into *out, in a fixed order independent of thread count
-  template <class T, class Op>
-  void reduce(const T* in, int n, T* out, Op op, T init) const {
+  // op over item(0), ..., item(n-1) into *out, in a fixed order independent of thread count:
+  // kReduceChunks chunks, each left to right from init, then the chunks in order
+  template <class Item, class T, class Op>
+  void reduce_items(int n, const Item& item, T* out, Op op, T init) const {
     T part[kReduceChunks];
-    int chunk = (n + kReduceChunks - 1) / kReduceChunks;
+    const int chunk = (n + kReduceChunks - 1) / kReduceChunks;
     for_each(kReduceChunks, [&](int c) {
       T acc = init;
-      int b = c * chunk, e = std::min(n, b + chunk);
-      for (int i = b; i < e; ++i) acc = op(acc, in[i]);
+      const int b = c * chunk, e = std::min(n, b + chunk);
+      for (int i = b; i < e; ++i) acc = op(acc, item(i));
       part[c] = acc;
     });
     T acc = init;
@@ -176,22 +177,18 @@ struct CpuExec {
     *out = acc;
   }
 
+  // reduce in[0, n) with op into *out, in a fixed order independent of thread count
+  template <class T, class Op>
+  void reduce(const T* in, int n, T* out, Op op, T init) const {
+    reduce_items(n, [in](int i) -> const T& { return in[i]; }, out, op, init);
+  }
+
   // f(i) returns item i's T; op over the n items from init (op's identity) into *out, then fin(0):
-  // the same chunks and order as reduce() over stored items (so the same result, bit for
-  // bit), without storing them
+  // reduce()'s chunks and order (so the same result as over stored items, bit for bit),
+  // without storing them
   template <class F, class T, class Op, class Fin>
   void for_each_reduce_then(int n, const F& f, T* out, Op op, T init, const Fin& fin) const {
-    T part[kReduceChunks];
-    const int chunk = (n + kReduceChunks - 1) / kReduceChunks;
-    for_each(kReduceChunks, [&](int c) {
-      T acc = init;
-      const int b = c * chunk, e = std::min(n, b + chunk);
-      for (int i = b; i < e; ++i) acc = op(acc, f(i));
-      part[c] = acc;
-    });
-    T acc = init;
-    for (int c = 0; c < kReduceChunks; ++c) acc = op(acc, part[c]);
-    *out = acc;
+    reduce_items(n, f, out, op, init);
     fin(0);
   }
 
