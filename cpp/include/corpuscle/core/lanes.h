@@ -207,7 +207,9 @@ struct SubWarpLanes {
   }
 
   // the cell walk in WarpLanes' order (the stencil's cells of the fluid layer, then of the
-  // ghost layer; ascending index in each), up to cap listed
+  // ghost layer; ascending index in each), up to cap listed. As WarpLanes, the lanes load the
+  // ranges of W stencil cells at once (lane l: cell k0 + l) and walk them with the ranges
+  // broadcast by shuffles
   template <int D, class Visitor>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
                                            int* list, int cap) const {
@@ -216,27 +218,37 @@ struct SubWarpLanes {
     g.spec.cell_of(xi, c);
     const unsigned below = (1u << lane()) - 1u;
     int count = 0;
-    for (int k = 0; k < nslots; ++k) {
-      uint32_t slot;
-      if (!stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) continue;
-      const uint32_t s = g.cell_start[slot], e = g.cell_end[slot];
-      for (uint32_t b = s; b < e; b += uint32_t(W)) {
-        const uint32_t j = b + uint32_t(lane());
-        Vec<D> d = Vec<D>::zero();
-        float r2 = 0.0f;
-        bool hit = false;
-        if (j < e) {
-          d = xi - g.pos[j];
-          r2 = norm2(d);
-          hit = r2 < g.spec.h2;
+    for (int k0 = 0; k0 < nslots; k0 += W) {
+      uint32_t sl = 0, el = 0;  // the range of stencil cell k0 + lane (empty outside the grid)
+      {
+        const int k = k0 + lane();
+        uint32_t slot;
+        if (k < nslots && stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) {
+          sl = g.cell_start[slot];
+          el = g.cell_end[slot];
         }
-        const unsigned m = group_ballot(hit);
-        if (hit) {
-          const int at = count + __popc(m & below);
-          if (at < cap) list[at] = int(j);
-          visit(int(j), d, r2);
+      }
+      const int kn = nslots - k0 < W ? nslots - k0 : W;
+      for (int q = 0; q < kn; ++q) {
+        const uint32_t s = __shfl_sync(mask(), sl, q, W), e = __shfl_sync(mask(), el, q, W);
+        for (uint32_t b = s; b < e; b += uint32_t(W)) {
+          const uint32_t j = b + uint32_t(lane());
+          Vec<D> d = Vec<D>::zero();
+          float r2 = 0.0f;
+          bool hit = false;
+          if (j < e) {
+            d = xi - g.pos[j];
+            r2 = norm2(d);
+            hit = r2 < g.spec.h2;
+          }
+          const unsigned m = group_ballot(hit);
+          if (hit) {
+            const int at = count + __popc(m & below);
+            if (at < cap) list[at] = int(j);
+            visit(int(j), d, r2);
+          }
+          count += __popc(m);
         }
-        count += __popc(m);
       }
     }
     return count;
