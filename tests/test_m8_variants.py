@@ -187,3 +187,28 @@ def test_a_batch_sorts_32_bit_keys_bit_for_bit_as_64_bit_ones(backend):
     assert runs[0][2][0] >= 3  # the scenes relisted (and sorted) several times
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
     assert runs[0][2] == runs[1][2]
+
+
+# A batch with 32-bit keys sorts only the segments (a scene's fluid or ghosts) whose scene
+# rebuilds, each by its cell keys (CUDA: a block a segment, sized to it); the 64-bit keys take
+# the sort of every segment at once. The same order, so bit for bit the same run, for segments
+# that take each of CUDA's block sizes (up to 1,024 slots: the test above; 2,048, 4,096, 8,192).
+@pytest.mark.parametrize("backend", [
+    "serial", pytest.param("cuda", marks=[pytest.mark.gpu, cuda])])
+@pytest.mark.parametrize("particles", [[1500, 1200], [3000, 2900], [5000, 4600]])
+def test_the_segment_sort_runs_bit_for_bit_as_the_sort_of_every_segment(backend, particles):
+    from corpuscle import _core
+
+    n = len(particles)
+    b = Batch.from_scene("magic8ball", n=n, backend="serial", particles=particles, seed=[4, 5], neighbors="lists",
+                         settle=0.0, randomize=False, shake=[], overrides={"sph.skin": 0.05})
+    arrays = {"position": b.field("position", copy=True), "velocity": b.field("velocity", copy=True)}
+    runs = []
+    for wide in (0, 1):
+        sim = _core.Simulation("magic8ball", backend, "lists", {**b.params, "wide_keys": wide}, arrays)
+        sim.step(6)
+        runs.append((np.array(sim.download("position")), np.array(sim.download("id")),
+                     [sim.scalars(s)["rebuilds"] for s in range(n)]))
+    assert min(runs[0][2]) >= 2  # sorted more than once
+    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
+    assert runs[0][2] == runs[1][2]

@@ -160,6 +160,30 @@ struct CpuExec {
     for_each(n, f);
   }
 
+  // `segments` segments of `len` slots each: a segment for which enabled(segment) has its
+  // pairs sorted by key bits [0, bits), stably (the others' outputs are not written), then the
+  // stage over every slot (CudaExec: a block per segment)
+  static bool segment_sort_fits(int len) { return len >= 1; }
+  template <class E, class F>
+  void sort_segments_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int segments, int len,
+                          int bits, const E& enabled, const F& f) {
+    if (segments <= 0 || len <= 0) return;
+    const uint32_t mask = bits >= 32 ? ~uint32_t(0) : ((uint32_t(1) << bits) - 1u);
+    for_each(segments, [&](int seg) {
+      if (!enabled(seg)) return;
+      const size_t begin = size_t(seg) * size_t(len);
+      std::vector<int> order(static_cast<size_t>(len));
+      std::iota(order.begin(), order.end(), 0);
+      const uint32_t* k = kin + begin;
+      std::stable_sort(order.begin(), order.end(), [k, mask](int a, int b) { return (k[a] & mask) < (k[b] & mask); });
+      for (int t = 0; t < len; ++t) {
+        kout[begin + t] = k[order[t]];
+        vout[begin + t] = vin[begin + order[t]];
+      }
+    });
+    for_each(int(size_t(segments) * size_t(len)), f);
+  }
+
   // op over item(0), ..., item(n-1) into *out, in a fixed order independent of thread count:
   // kReduceChunks chunks, each left to right from init, then the chunks in order
   template <class Item, class T, class Op>

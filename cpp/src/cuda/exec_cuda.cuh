@@ -180,6 +180,37 @@ __global__ void __launch_bounds__(kThreads) k_block_sort_then(const uint32_t* ki
   for (int j = int(threadIdx.x); j < n; j += kThreads) f(j);
 }
 
+// a block per segment of `len` slots (len <= kThreads * kItems): CUB's block radix sort of the
+// segment's pairs over key bits [0, bits) when enabled(segment) (stable; the slots past len
+// padded with all-ones keys, which sort last), then the stage f over the segment's slots
+template <int kThreads, int kItems, class E, class F>
+__global__ void __launch_bounds__(kThreads) k_segment_sort_then(const uint32_t* kin, uint32_t* kout, const int* vin,
+                                                                int* vout, int len, int bits, E enabled, F f) {
+  const int seg = int(blockIdx.x);
+  const long long begin = (long long)seg * len;
+  if (enabled(seg)) {
+    using Sort = cub::BlockRadixSort<uint32_t, kThreads, kItems, int>;
+    __shared__ typename Sort::TempStorage tmp;
+    uint32_t k[kItems];
+    int v[kItems];
+    for (int t = 0; t < kItems; ++t) {
+      const int idx = int(threadIdx.x) * kItems + t;
+      k[t] = idx < len ? kin[begin + idx] : 0xffffffffu;
+      v[t] = idx < len ? vin[begin + idx] : 0;
+    }
+    Sort(tmp).Sort(k, v, 0, bits);
+    for (int t = 0; t < kItems; ++t) {
+      const int idx = int(threadIdx.x) * kItems + t;
+      if (idx < len) {
+        kout[begin + idx] = k[t];
+        vout[begin + idx] = v[t];
+      }
+    }
+    __syncthreads();
+  }
+  for (int t = int(threadIdx.x); t < len; t += kThreads) f(int(begin + t));
+}
+
 // ---- engine primitives' kernels ----
 
 // a tile on CUDA: one block of kTile threads (see CpuTile in cpu/exec_cpu.h for the phase
@@ -476,6 +507,31 @@ struct CudaExec {
     }
     sort_pairs(kin, kout, vin, vout, n, bits);
     for_each(n, f);
+  }
+
+  // `segments` segments of `len` slots each: a segment for which enabled(segment) (read on
+  // the device) has its pairs sorted by key bits [0, bits), stably (the others' outputs are
+  // not written), then the stage over its slots: a block per segment, sized to it (up to
+  // kSortThreads * kSortItems slots; segment_sort_fits)
+  static constexpr int kSegmentItems = 8;
+  static bool segment_sort_fits(int len) { return len >= 1 && len <= kSortThreads * kSegmentItems; }
+  template <class E, class F>
+  void sort_segments_then(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int segments, int len,
+                          int bits, const E& enabled, const F& f) {
+    activate();
+    if (segments <= 0 || len <= 0) return;
+    if (!segment_sort_fits(len)) throw Error("sort_segments_then: a segment of more than 8192 slots");
+    const unsigned blocks = unsigned(segments);
+    if (len <= 128 * kSegmentItems)
+      k_segment_sort_then<128, kSegmentItems><<<blocks, 128, 0, stream_>>>(kin, kout, vin, vout, len, bits, enabled, f);
+    else if (len <= 256 * kSegmentItems)
+      k_segment_sort_then<256, kSegmentItems><<<blocks, 256, 0, stream_>>>(kin, kout, vin, vout, len, bits, enabled, f);
+    else if (len <= 512 * kSegmentItems)
+      k_segment_sort_then<512, kSegmentItems><<<blocks, 512, 0, stream_>>>(kin, kout, vin, vout, len, bits, enabled, f);
+    else
+      k_segment_sort_then<kSortThreads, kSegmentItems>
+          <<<blocks, kSortThreads, 0, stream_>>>(kin, kout, vin, vout, len, bits, enabled, f);
+    CPS_CUDA_LAUNCH_CHECK();
   }
 
   void sort_pairs(const uint32_t* kin, uint32_t* kout, const int* vin, int* vout, int n, int bits) {

@@ -215,19 +215,28 @@ class Pipeline {
     Arrays a = arrays(cur, nxt);
     // 1. keys come from the last step's integration (or prepare)
     // 2. sort by key (when rebuilding), then reorder into the other buffers (ghosts built
-    //    there, cell ranges) or carry the arrays over; a batch sorts every scene's segments
-    //    at once, each scene that does not rebuild keeping its order
+    //    there, cell ranges) or carry the arrays over; a batch sorts the segments of the
+    //    scenes that rebuild (or, where a segment is too long for that or the keys need 64
+    //    bits, every scene's segments at once, each scene that does not rebuild keeping its
+    //    order)
     if constexpr (!Many) {
       ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{md, g},
                     ReorderStage<Many>{md, g, a});
     } else {
       a.key_low_bits = key_low_bits_;
-      ex_.for_each(cap, SelectKeysStage{md, g, a});
-      if (key_low_bits_)
-        ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, key_low_bits_ + segment_bits(m));
-      else
-        ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + segment_bits(m));
-      ex_.for_each(cap, ReorderStage<Many>{md, g, a});
+      if (key_low_bits_ && Exec::segment_sort_fits(m.n_fluid)) {
+        // each segment (a scene's fluid or ghosts) by its cell keys where its scene rebuilds,
+        // the others left as they are, then the reorder (CUDA: a block a segment, one kernel)
+        ex_.sort_segments_then(a.keys, a.keys_sorted, a.idx, a.perm, 2 * B, m.n_fluid, key_low_bits_,
+                               SegmentRebuilds{md, g}, ReorderStage<Many>{md, g, a});
+      } else {
+        ex_.for_each(cap, SelectKeysStage{md, g, a});
+        if (key_low_bits_)
+          ex_.sort_pairs(a.keys, a.keys_sorted, a.idx, a.perm, cap, key_low_bits_ + segment_bits(m));
+        else
+          ex_.sort_pairs(a.keys64, a.keys64_sorted, a.idx, a.perm, cap, 32 + segment_bits(m));
+        ex_.for_each(cap, ReorderStage<Many>{md, g, a});
+      }
     }
     ex_.mark(0);
     // from here on the sorted arrays are current

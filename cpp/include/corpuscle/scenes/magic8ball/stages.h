@@ -170,6 +170,20 @@ struct SelectKeysStage {
   }
 };
 
+// whether segment `seg` of a batch's segmented sort (slots [seg n, (seg + 1) n): the fluid of
+// scene seg, or for seg >= n_scenes the ghosts of scene seg - n_scenes) is sorted: its scene
+// rebuilds this step. Sorted by the cell keys alone, each segment gets the order the sort of
+// every segment at once (SelectKeysStage) gives it; a segment not sorted keeps its order, and
+// the reorder then reads neither its sorted keys nor its permutation
+struct SegmentRebuilds {
+  const Model* model;
+  const Scene* g;
+  CPS_HD bool operator()(int seg) const {
+    const Scene* gs = g + seg % model->n_scenes;
+    return rebuilding(*model, gs) && !halted(gs);
+  }
+};
+
 // the sorted cell key of slot j (a batch's: the low half of its 64-bit key)
 template <bool Many>
 CPS_HD CPS_INLINE uint32_t sorted_key(const Arrays& a, int j) {
