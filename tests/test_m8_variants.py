@@ -168,22 +168,30 @@ def test_cuda_list_builds_agree_with_the_cpu(build, lanes):
     assert abs(g.state()["rebuilds"] - c.state()["rebuilds"]) <= 2
 
 
-@pytest.mark.parametrize("backend", ["serial", "cuda"])
-def test_a_batch_sorts_32_bit_keys_bit_for_bit_as_64_bit_ones(backend):
-    if backend == "cuda" and not Simulation.cuda_available():
-        pytest.skip("no usable CUDA device")
+def _key_width_runs(backend, particles, seeds, steps):
+    """A batch stepped with 32-bit cell keys, then 64-bit ones (`wide_keys`), from one start:
+    (positions, ids, each scene's rebuilds) of each."""
     from corpuscle import _core
 
-    # per-scene counts: inactive slots (keyed past every cell) at each segment's tail
-    b = Batch.from_scene("magic8ball", n=3, backend="serial", particles=[260, 200, 260], seed=[1, 2, 3],
-                         neighbors="lists", settle=0.0, randomize=False, shake=[], overrides={"sph.skin": 0.05})
+    n = len(particles)
+    b = Batch.from_scene("magic8ball", n=n, backend="serial", particles=particles, seed=seeds, neighbors="lists",
+                         settle=0.0, randomize=False, shake=[], overrides={"sph.skin": 0.05})
     arrays = {"position": b.field("position", copy=True), "velocity": b.field("velocity", copy=True)}
     runs = []
     for wide in (0, 1):
         sim = _core.Simulation("magic8ball", backend, "lists", {**b.params, "wide_keys": wide}, arrays)
-        sim.step(25)
+        sim.step(steps)
         runs.append((np.array(sim.download("position")), np.array(sim.download("id")),
-                     [sim.scalars(s)["rebuilds"] for s in range(3)]))
+                     [sim.scalars(s)["rebuilds"] for s in range(n)]))
+    return runs
+
+
+@pytest.mark.parametrize("backend", ["serial", "cuda"])
+def test_a_batch_sorts_32_bit_keys_bit_for_bit_as_64_bit_ones(backend):
+    if backend == "cuda" and not Simulation.cuda_available():
+        pytest.skip("no usable CUDA device")
+    # per-scene counts: inactive slots (keyed past every cell) at each segment's tail
+    runs = _key_width_runs(backend, [260, 200, 260], [1, 2, 3], 25)
     assert runs[0][2][0] >= 3  # the scenes relisted (and sorted) several times
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
     assert runs[0][2] == runs[1][2]
@@ -197,18 +205,7 @@ def test_a_batch_sorts_32_bit_keys_bit_for_bit_as_64_bit_ones(backend):
     "serial", pytest.param("cuda", marks=[pytest.mark.gpu, cuda])])
 @pytest.mark.parametrize("particles", [[1500, 1200], [3000, 2900], [5000, 4600]])
 def test_the_segment_sort_runs_bit_for_bit_as_the_sort_of_every_segment(backend, particles):
-    from corpuscle import _core
-
-    n = len(particles)
-    b = Batch.from_scene("magic8ball", n=n, backend="serial", particles=particles, seed=[4, 5], neighbors="lists",
-                         settle=0.0, randomize=False, shake=[], overrides={"sph.skin": 0.05})
-    arrays = {"position": b.field("position", copy=True), "velocity": b.field("velocity", copy=True)}
-    runs = []
-    for wide in (0, 1):
-        sim = _core.Simulation("magic8ball", backend, "lists", {**b.params, "wide_keys": wide}, arrays)
-        sim.step(6)
-        runs.append((np.array(sim.download("position")), np.array(sim.download("id")),
-                     [sim.scalars(s)["rebuilds"] for s in range(n)]))
+    runs = _key_width_runs(backend, particles, [4, 5], 6)
     assert min(runs[0][2]) >= 2  # sorted more than once
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
     assert runs[0][2] == runs[1][2]

@@ -520,7 +520,9 @@ struct CudaExec {
                           int bits, const E& enabled, const F& f) {
     activate();
     if (segments <= 0 || len <= 0) return;
-    if (!segment_sort_fits(len)) throw Error("sort_segments_then: a segment of more than 8192 slots");
+    if (!segment_sort_fits(len))
+      throw Error("sort_segments_then: a segment of " + std::to_string(len) + " slots, more than " +
+                  std::to_string(kSortThreads * kSegmentItems));
     const unsigned blocks = unsigned(segments);
     if (len <= 128 * kSegmentItems)
       k_segment_sort_then<128, kSegmentItems><<<blocks, 128, 0, stream_>>>(kin, kout, vin, vout, len, bits, enabled, f);

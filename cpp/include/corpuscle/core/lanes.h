@@ -206,10 +206,20 @@ struct SubWarpLanes {
     return kept;
   }
 
-  // the cell walk in WarpLanes' order (the stencil's cells of the fluid layer, then of the
-  // ghost layer; ascending index in each), up to cap listed. As WarpLanes, the lanes load the
-  // ranges of W stencil cells at once (lane l: cell k0 + l) and walk them with the ranges
-  // broadcast by shuffles
+  // cell range of stencil slot k (layer k / stencil, offset k % stencil), empty outside the grid
+  template <int D>
+  __device__ static void load_range(const GridView<D>& g, const int* c, int k, int nslots, uint32_t& s, uint32_t& e) {
+    uint32_t slot;
+    if (k >= nslots || !stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) return;
+    s = g.cell_start[slot];
+    e = g.cell_end[slot];
+  }
+
+  // the cell walk (WarpLanes': W = 32): the lanes load the ranges of W stencil cells at once
+  // (lane l: cell k0 + l), then walk those cells with the ranges broadcast by shuffles, each
+  // lane taking every W-th candidate of a cell. Neighbours are listed in the serial loop's
+  // order (the stencil's cells of the fluid layer, then of the ghost layer; ascending index in
+  // each: a ballot keeps lane order), up to cap; returns how many there were (on every lane)
   template <int D, class Visitor>
   __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
                                            int* list, int cap) const {
@@ -219,15 +229,8 @@ struct SubWarpLanes {
     const unsigned below = (1u << lane()) - 1u;
     int count = 0;
     for (int k0 = 0; k0 < nslots; k0 += W) {
-      uint32_t sl = 0, el = 0;  // the range of stencil cell k0 + lane (empty outside the grid)
-      {
-        const int k = k0 + lane();
-        uint32_t slot;
-        if (k < nslots && stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) {
-          sl = g.cell_start[slot];
-          el = g.cell_end[slot];
-        }
-      }
+      uint32_t sl = 0, el = 0;  // the range of stencil cell k0 + lane
+      load_range(g, c, k0 + lane(), nslots, sl, el);
       const int kn = nslots - k0 < W ? nslots - k0 : W;
       for (int q = 0; q < kn; ++q) {
         const uint32_t s = __shfl_sync(mask(), sl, q, W), e = __shfl_sync(mask(), el, q, W);
@@ -257,59 +260,7 @@ struct SubWarpLanes {
 
 // a full warp: lanes stride the neighbour candidates, sums reduce by butterfly shuffles
 // (the same tree on every run, so results are reproducible)
-struct WarpLanes : SubWarpLanes<32> {
-  // the warp's neighbour loop: lanes first load the ranges of all stencil cells at once
-  // (lane l: slots l and l + 32), then walk the cells with the ranges broadcast by shuffles,
-  // each lane taking every 32nd candidate of a cell. Neighbours found are listed in the
-  // serial loop's order (cell by cell, ascending index: a ballot keeps lane order), up to cap;
-  // returns how many there were (the same on every lane).
-  template <int D, class Visitor>
-  __device__ int for_each_neighbor_listing(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
-                                           int* list, int cap) const {
-    const int nslots = kStencil<D> * (ghosts ? 2 : 1);
-    const int l = lane();
-    int c[D];
-    g.spec.cell_of(xi, c);
-    uint32_t s0 = 0, e0 = 0, s1 = 0, e1 = 0;
-    load_range(g, c, l, nslots, s0, e0);
-    load_range(g, c, l + 32, nslots, s1, e1);
-    const unsigned below = (1u << l) - 1u;  // lanes before this one
-    int count = 0;
-    for (int k = 0; k < nslots; ++k) {
-      uint32_t s = __shfl_sync(0xffffffffu, k < 32 ? s0 : s1, k & 31);
-      uint32_t e = __shfl_sync(0xffffffffu, k < 32 ? e0 : e1, k & 31);
-      for (uint32_t base = s; base < e; base += 32u) {
-        const uint32_t j = base + uint32_t(l);
-        Vec<D> d = Vec<D>::zero();
-        float r2 = 0.0f;
-        bool hit = false;
-        if (j < e) {
-          d = xi - g.pos[j];
-          r2 = norm2(d);
-          hit = r2 < g.spec.h2;
-        }
-        const unsigned mask = __ballot_sync(0xffffffffu, hit);
-        if (hit) {
-          const int at = count + __popc(mask & below);
-          if (at < cap) list[at] = int(j);
-          visit(int(j), d, r2);
-        }
-        count += __popc(mask);
-      }
-    }
-    return count;
-  }
-
- private:
-  // cell range of stencil slot k (layer k / stencil, offset k % stencil), empty outside the grid
-  template <int D>
-  __device__ static void load_range(const GridView<D>& g, const int* c, int k, int nslots, uint32_t& s, uint32_t& e) {
-    uint32_t slot;
-    if (k >= nslots || !stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) return;
-    s = g.cell_start[slot];
-    e = g.cell_end[slot];
-  }
-};
+struct WarpLanes : SubWarpLanes<32> {};
 
 #endif
 
