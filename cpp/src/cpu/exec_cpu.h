@@ -345,6 +345,12 @@ struct CpuExec {
     if (*flag != 0) for_each(n, f);
   }
 
+  // for_each_lanes_w<W>(n, f) when *flag != 0
+  template <int W, class F>
+  void for_each_lanes_w_if(const int* flag, int n, const F& f) const {
+    if (*flag != 0) for_each_lanes(n, f);
+  }
+
   void zero(void* p, size_t bytes) const { std::memset(p, 0, bytes); }
   void to_host(void* dst, const void* src, size_t bytes) const { std::memcpy(dst, src, bytes); }
   void to_host_many(const std::vector<HostCopy>& copies) const {

@@ -269,6 +269,16 @@ __global__ void k_for_each_if(const int* flag, int n, F f) {
   for (long long i = (long long)blockIdx.x * blockDim.x + threadIdx.x; i < n; i += stride) f(int(i));
 }
 
+// the same with W lanes per item (f(i, SubWarpLanes<W>), a group of a warp per item): the
+// grid strides over whole groups, so a group's lanes stay together
+template <int W, class F>
+__global__ void k_for_each_lanes_w_if(const int* flag, int n, F f) {
+  if (*flag == 0) return;
+  const long long stride = (long long)gridDim.x * blockDim.x;
+  for (long long t = (long long)blockIdx.x * blockDim.x + threadIdx.x; t / W < n; t += stride)
+    f(int(t / W), SubWarpLanes<W>{});
+}
+
 // the sum of a scan's n inputs: its last output plus its last input
 template <class T, class U>
 __global__ void k_scan_total(const T* in, const U* out, int n, U* total) {
@@ -664,6 +674,19 @@ struct CudaExec {
     const long long cap = 16LL * (sms_ > 0 ? sms_ : 1);
     if (blocks > cap) blocks = cap;
     k_for_each_if<<<unsigned(blocks), kBlock, 0, stream_>>>(flag, n, f);
+    CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // for_each_lanes_w<W>(n, f) unless *flag is 0 (as for_each_if)
+  template <int W, class F>
+  void for_each_lanes_w_if(const int* flag, int n, const F& f) {
+    static_assert(kBlock % 32 == 0, "a block holds whole warps (the groups' masks)");
+    activate();
+    if (n <= 0) return;
+    long long blocks = ((long long)W * n + kBlock - 1) / kBlock;
+    const long long cap = 16LL * (sms_ > 0 ? sms_ : 1);
+    if (blocks > cap) blocks = cap;
+    k_for_each_lanes_w_if<W><<<unsigned(blocks), kBlock, 0, stream_>>>(flag, n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 

@@ -241,11 +241,11 @@ struct CellGridView {
     }
   }
 
-  // tags in order, then the cells around xi's cell (z, y, x, each from low to high; cells
-  // outside the grid skipped, so a grid narrower than three cells visits no cell twice), then
-  // each cell's slots in sorted order
-  template <bool kPairs, class Visit>
-  CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit) const {
+  // the cell ranges [s, e) of sorted slots around xi's cell, in the walk's order: tags in
+  // order, then the cells (z, y, x, each from low to high; cells outside the grid skipped, so a
+  // grid narrower than three cells visits no cell twice); f(s, e) for each
+  template <class F>
+  CPS_HD void for_each_cell_range(int i, const Vec<D>& xi, F&& f) const {
     int c[D];
     spec.cell_of(xi, c);
     int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
@@ -265,20 +265,23 @@ struct CellGridView {
       for (int z = lo[2]; z <= hi[2]; ++z) {
         for (int y = lo[1]; y <= hi[1]; ++y) {
           const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
-          for (int x = lo[0]; x <= hi[0]; ++x) {
-            const uint64_t slot = row + uint64_t(x);
-            uint32_t s = cell_start[slot];
-            const uint32_t e = cell_end[slot];
-            if (kPairs && s <= uint32_t(i)) s = uint32_t(i) + 1u;
-            for (uint32_t j = s; j < e; ++j) {
-              Vec<D> d = xi - pos[j];
-              float rr = norm2(d);
-              if (rr < r2) visit(int(j), d, rr);
-            }
-          }
+          for (int x = lo[0]; x <= hi[0]; ++x) f(cell_start[row + uint64_t(x)], cell_end[row + uint64_t(x)]);
         }
       }
     }
+  }
+
+  // the cells' slots in for_each_cell_range's order, each cell's in sorted order
+  template <bool kPairs, class Visit>
+  CPS_HD void walk(int i, const Vec<D>& xi, Visit& visit) const {
+    for_each_cell_range(i, xi, [&](uint32_t s, const uint32_t e) {
+      if (kPairs && s <= uint32_t(i)) s = uint32_t(i) + 1u;
+      for (uint32_t j = s; j < e; ++j) {
+        Vec<D> d = xi - pos[j];
+        float rr = norm2(d);
+        if (rr < r2) visit(int(j), d, rr);
+      }
+    });
   }
 };
 

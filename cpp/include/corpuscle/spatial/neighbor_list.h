@@ -25,6 +25,7 @@
 
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/error.h"
+#include "corpuscle/core/lanes.h"
 #include "corpuscle/spatial/index.h"
 
 namespace cps {
@@ -265,6 +266,40 @@ struct SlotListFillFn {
         ++c;
       });
     }
+    finish(i, c);
+  }
+  CPS_HD void operator()(int k, const SingleLane&) const { (*this)(k); }
+#ifdef __CUDACC__
+  // W lanes a slot (a cell grid's view: the lanes share its cell ranges): lane l takes the
+  // candidates s + l, s + l + W, ... of each cell, and a ballot lists the hits in candidate
+  // order, so the lists are those of the one-lane build, entry for entry. (One thread walking
+  // a slot's 27 cells waits on every load: latency-bound, docs/benchmarks.md.)
+  template <int W>
+  __device__ void operator()(int k, const SubWarpLanes<W>& L) const {
+    const int i = begin + k;
+    int c = 0;
+    if (src.active(i)) {
+      const auto xi = src.position(i);
+      const unsigned below = (1u << L.lane()) - 1u;
+      int* e = nbr + i;
+      src.for_each_cell_range(i, xi, [&](uint32_t s, uint32_t end) {
+        for (uint32_t b = s; b < end; b += uint32_t(W)) {
+          const uint32_t j = b + uint32_t(L.lane());
+          bool hit = false;
+          if (j < end && j != uint32_t(i)) hit = norm2(xi - src.pos[j]) < src.r2;
+          const unsigned m = L.group_ballot(hit);
+          if (hit) {
+            const int at = c + __popc(m & below);
+            if (at < capacity) e[size_t(at) * stride] = int(j);
+          }
+          c += __popc(m);
+        }
+      });
+    }
+    if (L.leader()) finish(i, c);
+  }
+#endif
+  CPS_HD void finish(int i, int c) const {
     counts[i] = c;
     if (c > capacity && overflow) atomic_cas(overflow, 0, code);
   }
@@ -292,7 +327,8 @@ class SlotNeighborList {
   // list slots [begin, begin + count) from the source view within list_radius (at most its
   // radius); when `when` is given, only if *when != 0 (read on the device: a stage can skip the
   // build without a host round trip). Overflow: *overflow = code, the counts are the true ones.
-  template <class View>
+  // W lanes a slot (W > 1: a cell grid's view; the CPU runs one lane): the same lists.
+  template <int W = 1, class View>
   void fill(Exec& ex, const View& src, float list_radius, int begin, int count, int* overflow, int code,
             const int* when = nullptr) {
     static_assert(View::kDim == D, "the source index has another dimension");
@@ -305,8 +341,13 @@ class SlotNeighborList {
     list_radius_ = list_radius;
     SlotListFillFn<View> f{src.with_radius(list_radius), nbr_.data(), counts_.data(), stride_, capacity_, begin,
                            overflow, code};
-    if (when) ex.for_each_if(when, count, f);
-    else ex.for_each(count, f);
+    if constexpr (W == 1) {
+      if (when) ex.for_each_if(when, count, f);
+      else ex.for_each(count, f);
+    } else {
+      if (when) ex.template for_each_lanes_w_if<W>(when, count, f);
+      else ex.template for_each_lanes_w<W>(count, f);
+    }
   }
 
   // the lists over positions `pos` (numbered like the source's slots), queried with radius

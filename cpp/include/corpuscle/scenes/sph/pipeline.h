@@ -89,6 +89,10 @@ inline int auto_list_lanes(int n_fluid) {
   }
 }
 
+// the `lists` build's lanes per slot on CUDA (SlotListFillFn: the lanes split each cell's
+// candidates; the CPU runs one lane)
+constexpr int kListFillLanes = 8;
+
 constexpr int kAllPairsTile = 128;
 constexpr int kChunk = 32;
 
@@ -253,9 +257,9 @@ class Pipeline {
     CellGridView<D> gv = grid_.view(s.pos);
     if constexpr (std::is_same_v<Index, CompactIndex>) compact_.build(ex_, gv);
     if constexpr (kLists) {
-      lists_.fill(ex_, gv, m_.list_radius, 0, nf_, &g->clock.bad, kBadNeighbors, &g->rebuild);
+      lists_.template fill<kListFillLanes>(ex_, gv, m_.list_radius, 0, nf_, &g->clock.bad, kBadNeighbors, &g->rebuild);
       if (n_ > nf_)  // the walls list the fluid only
-        lists_.fill(ex_, gv.tags(kTagFluid, kTagFluid + 1), m_.list_radius, nf_, n_ - nf_, &g->clock.bad,
+        lists_.template fill<kListFillLanes>(ex_, gv.tags(kTagFluid, kTagFluid + 1), m_.list_radius, nf_, n_ - nf_, &g->clock.bad,
                     kBadNeighbors, &g->rebuild);
     }
     ex_.mark(0);
