@@ -337,6 +337,30 @@ def test_fourtakas_rho_h_odd_form_matches_published_to_second_order():
     assert np.abs(even).max() > 1e-2  # the forms do differ: the test can tell them apart
 
 
+@pytest.mark.parametrize("gamma", [1.0, 1.4, 7.0, 20.0])
+def test_fourtakas_odd_part_series_and_powers_match_float64(gamma):
+    # the odd part is summed from its series for |kz z| <= 0.1 and from the powers past it;
+    # both must give the float64 odd part to float32 accuracy (relative, and near zero absolute
+    # against its slope rho0 kz / gamma), on both sides of the switch and past |kz z| = 1
+    # (where a power's argument clamps at 0)
+    kz = gamma * G / C0**2
+    x = np.concatenate([np.linspace(-1.5, 1.5, 301), np.linspace(0.09, 0.11, 41), -np.linspace(0.09, 0.11, 41),
+                        np.geomspace(1e-7, 1e-2, 30)])
+    x = x[np.abs(np.abs(x) - 1.0) > 1e-2]  # (at |kz z| = 1 a power's slope is infinite: ill-conditioned)
+    z = f32(x / kz).astype(np.float64)
+    got = np.asarray(testing.sph_fourtakas_rho_h(C0, RHO0, gamma, G, f32(z), False), np.float64)
+    ref = rho_h_odd(z, C0, RHO0, gamma, G)
+    # the series: float32 rounding of the sum; the powers: of two numbers near 1, then their
+    # difference (absolute, a few 1e-7 of rho0)
+    series = np.abs(kz * z) < 0.0999  # (at the switch itself float32 rounding may take either)
+    assert series.sum() > 50 and (~series).sum() > 50
+    np.testing.assert_allclose(got[series], ref[series], rtol=1e-6, atol=0)
+    np.testing.assert_allclose(got[~series], ref[~series], rtol=1e-6, atol=3e-7 * RHO0)
+    # the first-order slope: a broken series (a wrong coefficient) is off by far more
+    small = np.abs(kz * z) < 1e-3
+    np.testing.assert_allclose(got[small], RHO0 * kz * z[small] / gamma, rtol=1e-5)
+
+
 def test_unknown_diffusion_kind_is_refused():
     x = np.zeros((2, 2), F32)
     with pytest.raises(ValueError):

@@ -51,6 +51,7 @@ constexpr int kSphKernelKinds = 5;
 // the constants every kernel carries: support h, h^2, W's normalisation c, grad W's gc
 struct SphKernelConsts {
   float h, h2, c, gc;
+  float inv_h;  // 1 / h (a product where the gradients would divide)
 };
 
 template <int D, SphKernelKind K>
@@ -62,6 +63,7 @@ struct KernelFormula<D, SphKernelKind::Poly6> {
   CPS_HD static SphKernelConsts make(float h) {
     SphKernelConsts k;
     k.h = h;
+    k.inv_h = 1.0f / h;
     k.h2 = h * h;
     float h4 = k.h2 * k.h2;
     // evaluated as in SphKernels<D>::make, so W(r^2) agrees with it bit for bit
@@ -90,6 +92,7 @@ struct KernelFormula<D, SphKernelKind::Spiky> {
   CPS_HD static SphKernelConsts make(float h) {
     SphKernelConsts k;
     k.h = h;
+    k.inv_h = 1.0f / h;
     k.h2 = h * h;
     float h4 = k.h2 * k.h2;
     if constexpr (D == 3) {
@@ -120,6 +123,7 @@ struct KernelFormula<D, SphKernelKind::Viscosity> {
   CPS_HD static SphKernelConsts make(float h) {
     SphKernelConsts k;
     k.h = h;
+    k.inv_h = 1.0f / h;
     k.h2 = h * h;
     float h4 = k.h2 * k.h2;
     if constexpr (D == 3) {
@@ -172,6 +176,7 @@ struct KernelFormula<D, SphKernelKind::CubicSpline> {
   CPS_HD static SphKernelConsts make(float h) {
     SphKernelConsts k;
     k.h = h;
+    k.inv_h = 1.0f / h;
     k.h2 = h * h;
     float hd = D == 3 ? k.h2 * h : k.h2;
     k.c = (D == 3 ? 8.0f / kPi : 40.0f / (7.0f * kPi)) / hd;
@@ -187,7 +192,7 @@ struct KernelFormula<D, SphKernelKind::CubicSpline> {
   }
   // grad W = c / h^2 (f'(q) / q) d: f'/q = 18 q - 12 (q < 1/2), -6 (1 - q)^2 / q (q >= 1/2)
   CPS_HD static Vec<D> grad(const SphKernelConsts& k, const Vec<D>& d, float r) {
-    float q = fdiv_fast(r, k.h);
+    float q = r * k.inv_h;
     if (q >= 1.0f) return Vec<D>::zero();
     if (q < 0.5f) return d * (k.gc * (18.0f * q - 12.0f));
     float t = 1.0f - q;
@@ -201,6 +206,7 @@ struct KernelFormula<D, SphKernelKind::WendlandC2> {
   CPS_HD static SphKernelConsts make(float h) {
     SphKernelConsts k;
     k.h = h;
+    k.inv_h = 1.0f / h;
     k.h2 = h * h;
     float hd = D == 3 ? k.h2 * h : k.h2;
     k.c = (D == 3 ? 21.0f / (2.0f * kPi) : 7.0f / kPi) / hd;
@@ -215,7 +221,7 @@ struct KernelFormula<D, SphKernelKind::WendlandC2> {
   }
   // dW/dr = -20 c q (1 - q)^3 / h, so grad W = -20 c / h^2 (1 - q)^3 d
   CPS_HD static Vec<D> grad(const SphKernelConsts& k, const Vec<D>& d, float r) {
-    float q = fdiv_fast(r, k.h);
+    float q = r * k.inv_h;
     if (q >= 1.0f) return Vec<D>::zero();
     float t = 1.0f - q;
     return d * (k.gc * t * t * t);

@@ -26,11 +26,13 @@ namespace cps {
 
 // mu_ij = hs v_ij . r_ij / (r_ij^2 + eta^2) (Monaghan 1992, section 4); |mu_ij| is also the
 // pair's speed in the DualSPHysics CFL limit dt_cv (physics/timestep.h, choose_dt_cfl)
-// (den = r^2 + eta^2 and vr = v_ij . r_ij given: what a pair loop computes once for every term)
-CPS_HD CPS_INLINE float sph_mu_den(float hs, float vr, float den) { return fdiv_fast(hs * vr, den); }
+// (inv_den = 1 / (r^2 + eta^2) and vr = v_ij . r_ij given: what a pair loop computes once for
+// every term, one reciprocal where each term would divide)
+CPS_HD CPS_INLINE float sph_inv_den(float r2, float eta2) { return fdiv_fast(1.0f, r2 + eta2); }
+CPS_HD CPS_INLINE float sph_mu_inv(float hs, float vr, float inv_den) { return hs * vr * inv_den; }
 template <int D>
 CPS_HD CPS_INLINE float sph_mu(float hs, float eta2, const Vec<D>& d, const Vec<D>& dv, float r2) {
-  return sph_mu_den(hs, dot(dv, d), r2 + eta2);
+  return sph_mu_inv(hs, dot(dv, d), sph_inv_den(r2, eta2));
 }
 
 // ---- Monaghan artificial viscosity (Monaghan 1992, section 4; Monaghan & Gingold 1983) ----
@@ -46,7 +48,7 @@ struct ArtificialViscosity {
   }
 };
 
-// with vr = v_ij . r_ij and mu = mu_ij given (sph_mu_den with p.hs and r^2 + p.eta2)
+// with vr = v_ij . r_ij and mu = mu_ij given (sph_mu_inv with p.hs and 1 / (r^2 + p.eta2))
 CPS_HD CPS_INLINE float monaghan_pi_mu(const ArtificialViscosity& p, float vr, float mu, float c_bar, float rho_bar) {
   if (vr >= 0.0f) return 0.0f;  // receding (or sliding past): no viscosity
   return fdiv_fast(-p.alpha * c_bar * mu + p.beta * mu * mu, rho_bar);
@@ -56,7 +58,7 @@ CPS_HD CPS_INLINE float monaghan_pi(const ArtificialViscosity& p, const Vec<D>& 
                                     float c_bar, float rho_bar) {
   float vr = dot(dv, d);
   if (vr >= 0.0f) return 0.0f;
-  return monaghan_pi_mu(p, vr, sph_mu_den(p.hs, vr, r2 + p.eta2), c_bar, rho_bar);
+  return monaghan_pi_mu(p, vr, sph_mu_inv(p.hs, vr, sph_inv_den(r2, p.eta2)), c_bar, rho_bar);
 }
 
 template <int D>
@@ -116,6 +118,15 @@ CPS_HD CPS_INLINE Vec<D> laminar_viscosity_acc(const LaminarViscosity& p, const 
 // fourtakas_rho_h_published() gives the published form for comparison.
 enum class DensityDiffusionKind : int { None = 0, Molteni = 1, Fourtakas = 2 };
 
+// The odd part is a pair's cost that the other terms do not have: two powers (four MUFU
+// operations on a GPU, whose special-function units are an eighth of its FMA lanes). For
+// |kz z| <= kFourtakasSeriesMax it is summed from its series instead,
+//   rho0 / 2 ((1 + x)^a - (1 - x)^a) = rho0 (C(a,1) x + C(a,3) x^3 + C(a,5) x^5 + C(a,7) x^7) + ...,
+// x = kz z, a = 1 / gamma, C the binomial coefficients (even powers cancel). For gamma >= 1 the
+// next term is below |C(a,9) / C(a,1)| x^8 <= 0.1 x^8 of the sum, < 1e-8 at x = 0.1 (float32
+// rounding is 6e-8); a pair's |kz z| is ~1e-3 (2 h g gamma / c0^2). Past 0.1: the powers.
+constexpr float kFourtakasSeriesMax = 0.1f;
+
 struct DensityDiffusion {
   DensityDiffusionKind kind;
   float coeff;      // 2 delta hs c0
@@ -123,14 +134,23 @@ struct DensityDiffusion {
   float rho0;       // rest density (Fourtakas)
   float gamma_inv;  // 1 / gamma (Fourtakas)
   float kz;         // rho0 g / B = gamma g / c0^2 (Fourtakas)
+  float c1, c3, c5, c7;  // rho0 C(1/gamma, k): the odd part's series (Fourtakas)
 
-  CPS_HD static DensityDiffusion none() { return DensityDiffusion{DensityDiffusionKind::None, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f}; }
+  CPS_HD static DensityDiffusion none() {
+    return DensityDiffusion{DensityDiffusionKind::None, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+  }
   CPS_HD static DensityDiffusion molteni(float delta, float hs, float c0) {
-    return DensityDiffusion{DensityDiffusionKind::Molteni, 2.0f * delta * hs * c0, 0.01f * hs * hs, 0.0f, 1.0f, 0.0f};
+    return DensityDiffusion{DensityDiffusionKind::Molteni, 2.0f * delta * hs * c0, 0.01f * hs * hs, 0.0f, 1.0f, 0.0f,
+                            0.0f, 0.0f, 0.0f, 0.0f};
   }
   CPS_HD static DensityDiffusion fourtakas(float delta, float hs, float c0, float rho0, float gamma, float g) {
+    // C(a, k) = C(a, k - 2) (a - k + 2)(a - k + 1) / (k (k - 1)), in double
+    const double a = 1.0 / double(gamma);
+    const double b1 = a, b3 = b1 * (a - 1.0) * (a - 2.0) / 6.0, b5 = b3 * (a - 3.0) * (a - 4.0) / 20.0,
+                 b7 = b5 * (a - 5.0) * (a - 6.0) / 42.0;
     return DensityDiffusion{DensityDiffusionKind::Fourtakas, 2.0f * delta * hs * c0, 0.01f * hs * hs, rho0,
-                            1.0f / gamma, gamma * g / (c0 * c0)};
+                            1.0f / gamma, gamma * g / (c0 * c0), float(rho0 * b1), float(rho0 * b3),
+                            float(rho0 * b5), float(rho0 * b7)};
   }
 };
 
@@ -138,29 +158,35 @@ struct DensityDiffusion {
 CPS_HD CPS_INLINE float fourtakas_rho_h_published(const DensityDiffusion& p, float z_ij) {
   return p.rho0 * (fpow(fmax2(1.0f + p.kz * z_ij, 0.0f), p.gamma_inv) - 1.0f);
 }
-// its odd part, the one used: rho0 / 2 ((1 + kz z)^(1/gamma) - (1 - kz z)^(1/gamma))
+// its odd part, the one used: rho0 / 2 ((1 + kz z)^(1/gamma) - (1 - kz z)^(1/gamma)) (the series
+// above for |kz z| <= kFourtakasSeriesMax)
 CPS_HD CPS_INLINE float fourtakas_rho_h(const DensityDiffusion& p, float z_ij) {
-  float up = fpow_fast(fmax2(1.0f + p.kz * z_ij, 0.0f), p.gamma_inv);
-  float dn = fpow_fast(fmax2(1.0f - p.kz * z_ij, 0.0f), p.gamma_inv);
+  const float x = p.kz * z_ij;
+  if ((x < 0.0f ? -x : x) <= kFourtakasSeriesMax) {
+    const float x2 = x * x;
+    return x * (p.c1 + x2 * (p.c3 + x2 * (p.c5 + x2 * p.c7)));
+  }
+  float up = fpow_fast(fmax2(1.0f + x, 0.0f), p.gamma_inv);
+  float dn = fpow_fast(fmax2(1.0f - x, 0.0f), p.gamma_inv);
   return 0.5f * p.rho0 * (up - dn);
 }
 
-// with den = r^2 + p.eta2 and V_j = m_j / rho_j given (what a pair loop has at hand)
+// with inv_den = 1 / (r^2 + p.eta2) and V_j = m_j / rho_j given (what a pair loop has at hand)
 template <int D>
-CPS_HD CPS_INLINE float density_diffusion_rate_v(const DensityDiffusion& p, const Vec<D>& d, float den, float rho_i,
-                                                 float rho_j, float vol_j, const Vec<D>& gradW) {
+CPS_HD CPS_INLINE float density_diffusion_rate_v(const DensityDiffusion& p, const Vec<D>& d, float inv_den,
+                                                 float rho_i, float rho_j, float vol_j, const Vec<D>& gradW) {
   if (p.kind == DensityDiffusionKind::None) return 0.0f;
   float drho = rho_j - rho_i;
   if (p.kind == DensityDiffusionKind::Fourtakas) drho -= fourtakas_rho_h(p, d[D - 1]);
   // r_ji . grad_i W_ij = -d . gradW >= 0
-  return fdiv_fast(p.coeff * drho * (-dot(d, gradW)), den) * vol_j;
+  return p.coeff * drho * (-dot(d, gradW)) * inv_den * vol_j;
 }
 
 template <int D>
 CPS_HD CPS_INLINE float density_diffusion_rate(const DensityDiffusion& p, const Vec<D>& d, float r2, float rho_i,
                                                float rho_j, float m_j, const Vec<D>& gradW) {
   if (p.kind == DensityDiffusionKind::None) return 0.0f;
-  return density_diffusion_rate_v<D>(p, d, r2 + p.eta2, rho_i, rho_j, m_j / rho_j, gradW);
+  return density_diffusion_rate_v<D>(p, d, sph_inv_den(r2, p.eta2), rho_i, rho_j, m_j / rho_j, gradW);
 }
 
 }  // namespace cps

@@ -143,13 +143,14 @@ struct InteractStage {
       vol_j = pr.vol;
     }
     const float rho_i = s.rho_i;
-    // r^2 + eta^2 and v_ij . r_ij, once for every term (each term's eta^2 is the same 0.01 hs^2,
-    // PairConsts::make: so this is the value each would compute)
+    // 1 / (r^2 + eta^2) and v_ij . r_ij, once for every term (each term's eta^2 is the same
+    // 0.01 hs^2, PairConsts::make: so this is the value each would compute)
     const float den = r2 + m.eta2;
+    const float inv_den = sph_inv_den(r2, m.eta2);
     const float vr = dot(dv, d);
-    const float mu = sph_mu_den(m.hs, vr, den);
+    const float mu = sph_mu_inv(m.hs, vr, inv_den);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, den, rho_i, rho_j, vol_j, gw);
+    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, inv_den, rho_i, rho_j, vol_j, gw);
     // p_i / rho_i^2 + p_j / rho_j^2 (each computed once per particle, in the reorder)
     const float pterm = s.pr2_i + pv.pr2;
     s.acc -= gw * (m.mass * pterm);
