@@ -76,6 +76,26 @@ __device__ void block_reduce_then(const T* in, int n, T* out, Op op, T init, con
   }
 }
 
+// one-launch reductions: every thread's writes made visible, then whether this block is the
+// last of the grid to arrive (the counter counts the blocks; the last one resets it)
+__device__ inline bool block_arrives_last(unsigned* counter) {
+  __shared__ bool last;
+  __threadfence();
+  __syncthreads();
+  if (threadIdx.x == 0) last = atomicAdd(counter, 1u) == gridDim.x - 1u;
+  __syncthreads();
+  return last;
+}
+// ... and the last block's part: reduce in[0, n) in a fixed order, run fin, reset the counter
+// for the next launch
+template <class T, class Op, class Fin, int kThreads>
+__device__ void last_block_reduce_then(const T* in, int n, T* out, Op op, T init, const Fin& fin,
+                                       unsigned* counter) {
+  __threadfence();
+  block_reduce_then<T, Op, Fin, kThreads>(in, n, out, op, init, fin);
+  if (threadIdx.x == 0) *counter = 0u;
+}
+
 // a stage that does nothing (a reduction with no follow-up)
 struct NoStage {
   CPS_HD void operator()(int) const {}
@@ -88,15 +108,7 @@ __global__ void __launch_bounds__(kThreads) k_for_each_warp_reduce_then(int n, F
                                                                         T init, Fin fin, unsigned* counter) {
   int i = int((blockIdx.x * blockDim.x + threadIdx.x) >> 5);
   if (i < n) f(i, WarpLanes{});
-  __shared__ bool last;
-  __threadfence();
-  __syncthreads();
-  if (threadIdx.x == 0) last = atomicAdd(counter, 1u) == gridDim.x - 1u;
-  __syncthreads();
-  if (!last) return;
-  __threadfence();
-  block_reduce_then<T, Op, Fin, kThreads>(items, n, out, op, init, fin);
-  if (threadIdx.x == 0) *counter = 0u;  // ready for the next launch
+  if (block_arrives_last(counter)) last_block_reduce_then<T, Op, Fin, kThreads>(items, n, out, op, init, fin, counter);
 }
 
 // f(i) returns item i (a T); a fixed grid of blocks strides over [0, n) (thread t takes t,
@@ -109,21 +121,13 @@ __global__ void __launch_bounds__(kThreads) k_for_each_reduce_then(int n, F f, T
                                                                    Fin fin, unsigned* counter) {
   using BlockReduce = cub::BlockReduce<T, kThreads>;
   __shared__ typename BlockReduce::TempStorage tmp;
-  __shared__ bool last;
   T acc = init;
   const int stride = int(gridDim.x) * kThreads;
   for (int i = int(blockIdx.x) * kThreads + int(threadIdx.x); i < n; i += stride) acc = op(acc, f(i));
   const T r = BlockReduce(tmp).Reduce(acc, op);
-  if (threadIdx.x == 0) {
-    partials[blockIdx.x] = r;
-    __threadfence();
-    last = atomicAdd(counter, 1u) == gridDim.x - 1u;
-  }
-  __syncthreads();
-  if (!last) return;
-  __threadfence();
-  block_reduce_then<T, Op, Fin, kThreads>(partials, int(gridDim.x), out, op, init, fin);
-  if (threadIdx.x == 0) *counter = 0u;  // ready for the next launch
+  if (threadIdx.x == 0) partials[blockIdx.x] = r;
+  if (block_arrives_last(counter))
+    last_block_reduce_then<T, Op, Fin, kThreads>(partials, int(gridDim.x), out, op, init, fin, counter);
 }
 
 #if CUDART_VERSION >= 13000

@@ -122,7 +122,7 @@ class Pipeline {
   static double bytes_needed(const ModelT& m) {
     const double n = double(m.n_fluid) + double(m.n_wall);
     const double per = 2 * (3 * sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int)) + sizeof(float) + sizeof(Vec<D>) +
-                       sizeof(PairVel) + sizeof(PairRho) + sizeof(VecA<D>) +
+                       sizeof(PairVel) + (D == 2 ? sizeof(PairRho) : 0) + sizeof(VecA<D>) +
                        sizeof(float) + sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
                        (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
@@ -152,7 +152,7 @@ class Pipeline {
     }
     prs_.resize(n_);
     pv_.resize(n_);
-    pr_.resize(n_);
+    if constexpr (D == 2) pr_.resize(n_);  // (3-D: rho_j rides in pos4)
     pos4_.resize(n_);
     if constexpr (kLists) {
       if (!(m.list_radius >= m.h) || !(m.rebuild_disp2 >= 0.0f) || m.max_neighbors < 1)
@@ -401,7 +401,7 @@ class Pipeline {
     a.id_alt = id_[nxt].data();
     a.prs = prs_.data();
     a.pv = pv_.data();
-    a.pr = pr_.data();
+    a.pr = D == 2 ? pr_.data() : nullptr;
     a.pos4 = pos4_.data();
     a.x_build = kLists ? x_build_.data() : nullptr;
     a.acc = acc_.data();
