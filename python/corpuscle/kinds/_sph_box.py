@@ -76,7 +76,7 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
         "sph.lanes": _K("int", 0, "", 0, 8,
                         "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
                         "(their partial sums merged in a fixed order); 0: chosen by the state's size (on CUDA the "
-                        "fewest, up to 8, that give 2^20 threads; the CPU backends 1)"),
+                        "fewest, up to 8, that give 400,000 threads; the CPU backends 1)"),
         "timestep.cfl": _K("float", 0.2, "", 0.0, 1.0, "CFL number of the time step (DualSPHysics: 0.2)", lo_open=True),
         "timestep.dt_min": _K("float", 1e-9, "s", 0.0, 1.0, "smallest time step", lo_open=True),
         "timestep.dt_max": _K("float", 1e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),

@@ -220,16 +220,26 @@ struct SlotListView {
     const int* e = nbr + i + size_t(first) * stride;
     const size_t step = size_t(kWidth) * stride;
     int k = first;
+    // loaded ahead (the walk waits on memory, not on arithmetic: ncu's long-scoreboard stalls,
+    // docs/benchmarks.md): entry k's index j1 and position x1, entry k + kWidth's index j2; each
+    // round starts the loads of the next, so a load's latency overlaps a round of work
+    int j1 = k < c ? e[0] : -1;
+    int j2 = k + kWidth < c ? e[step] : -1;
+    Vec<D> x1 = j1 >= 0 ? VecA<D>::load(pos + j1) : Vec<D>::zero();
     for (;;) {
       int j = -1;
       Vec<D> d;
       float rr = 0.0f;
-      while (k < c) {
-        const int jj = *e;
+      while (j1 >= 0) {
+        const int jj = j1;
+        const Vec<D> xj = x1;
+        j1 = j2;
+        j2 = k + 2 * kWidth < c ? e[2 * step] : -1;
+        if (j1 >= 0) x1 = VecA<D>::load(pos + j1);
         k += kWidth;
         e += step;
         if (kPairs && jj <= i) continue;
-        d = xi - VecA<D>::load(pos + jj);
+        d = xi - xj;
         rr = norm2(d);
         if (rr < r2) {
           j = jj;

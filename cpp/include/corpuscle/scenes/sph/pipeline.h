@@ -71,13 +71,13 @@ struct DamBreak2Kind {
 };
 
 // the `lists` pair pass's lanes per particle when the scene does not say (sph.lanes = 0): the
-// CPU one; CUDA enough lanes (a power of two, at most kMaxAutoListLanes) that lanes x fluid
-// particles reach kListThreads, about four waves of the GPU's resident threads. H200,
-// 2026-12-02 (docs/benchmarks.md): 129,600 particles 1,499 / 1,581 / 1,688 / 1,733 steps/s at
-// 1 / 2 / 4 / 8 lanes; 1,056,321 particles 303 / 274 / 277 / 261: more lanes pay only while one
-// lane a particle would leave the GPU short of threads.
+// CPU one; CUDA the fewest lanes (a power of two, at most kMaxAutoListLanes) that give lanes x
+// fluid particles >= kListThreads. H200, 2026-12-02 (docs/benchmarks.md), with the list walk
+// loading ahead: 129,600 particles 1,814 / 1,882 / 1,819 steps/s at 2 / 4 / 8 lanes; 1,056,321
+// particles 351 / 297 at 1 / 2 (before it: 1,499 / 1,581 / 1,688 / 1,733 at 1 / 2 / 4 / 8). More
+// lanes pay only while one lane a particle would leave the GPU short of threads.
 constexpr int kMaxAutoListLanes = 8;
-constexpr long long kListThreads = 1LL << 20;
+constexpr long long kListThreads = 400000;
 template <class Exec>
 inline int auto_list_lanes(int n_fluid) {
   if constexpr (!Exec::on_device) {
