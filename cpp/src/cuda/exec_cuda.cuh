@@ -674,10 +674,7 @@ struct CudaExec {
   void for_each_if(const int* flag, int n, const F& f) {
     activate();
     if (n <= 0) return;
-    long long blocks = (n + kBlock - 1) / kBlock;
-    const long long cap = 16LL * (sms_ > 0 ? sms_ : 1);
-    if (blocks > cap) blocks = cap;
-    k_for_each_if<<<unsigned(blocks), kBlock, 0, stream_>>>(flag, n, f);
+    k_for_each_if<<<flagged_blocks(n), kBlock, 0, stream_>>>(flag, n, f);
     CPS_CUDA_LAUNCH_CHECK();
   }
 
@@ -687,11 +684,16 @@ struct CudaExec {
     static_assert(kBlock % 32 == 0, "a block holds whole warps (the groups' masks)");
     activate();
     if (n <= 0) return;
-    long long blocks = ((long long)W * n + kBlock - 1) / kBlock;
-    const long long cap = 16LL * (sms_ > 0 ? sms_ : 1);
-    if (blocks > cap) blocks = cap;
-    k_for_each_lanes_w_if<W><<<unsigned(blocks), kBlock, 0, stream_>>>(flag, n, f);
+    k_for_each_lanes_w_if<W><<<flagged_blocks((long long)W * n), kBlock, 0, stream_>>>(flag, n, f);
     CPS_CUDA_LAUNCH_CHECK();
+  }
+
+  // the grid of a flagged grid-stride launch over `threads` threads: at most 16 blocks a
+  // multiprocessor (a skipped launch stays one short one)
+  unsigned flagged_blocks(long long threads) const {
+    const long long blocks = (threads + kBlock - 1) / kBlock;
+    const long long cap = 16LL * (sms_ > 0 ? sms_ : 1);
+    return unsigned(blocks > cap ? cap : blocks);
   }
 
   void zero(void* p, size_t bytes) {

@@ -134,14 +134,11 @@ struct DensityDiffusion {
   float rho0;       // rest density (Fourtakas)
   float gamma_inv;  // 1 / gamma (Fourtakas)
   float kz;         // rho0 g / B = gamma g / c0^2 (Fourtakas)
-  float c1, c3, c5, c7;  // rho0 C(1/gamma, k): the odd part's series (Fourtakas)
+  float c1 = 0.0f, c3 = 0.0f, c5 = 0.0f, c7 = 0.0f;  // rho0 C(1/gamma, k): the odd part's series (Fourtakas)
 
-  CPS_HD static DensityDiffusion none() {
-    return DensityDiffusion{DensityDiffusionKind::None, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
-  }
+  CPS_HD static DensityDiffusion none() { return DensityDiffusion{DensityDiffusionKind::None, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f}; }
   CPS_HD static DensityDiffusion molteni(float delta, float hs, float c0) {
-    return DensityDiffusion{DensityDiffusionKind::Molteni, 2.0f * delta * hs * c0, 0.01f * hs * hs, 0.0f, 1.0f, 0.0f,
-                            0.0f, 0.0f, 0.0f, 0.0f};
+    return DensityDiffusion{DensityDiffusionKind::Molteni, 2.0f * delta * hs * c0, 0.01f * hs * hs, 0.0f, 1.0f, 0.0f};
   }
   CPS_HD static DensityDiffusion fourtakas(float delta, float hs, float c0, float rho0, float gamma, float g) {
     // C(a, k) = C(a, k - 2) (a - k + 2)(a - k + 1) / (k (k - 1)), in double

@@ -214,49 +214,17 @@ struct CellGridView {
     walk<true>(i, xi, visit);
   }
 
-  // the slots in the 3^D cells around xi's cell (in the grid) of tags [tag_begin, tag_end),
-  // and how many cells that block has inside the grid: a particle's local number density
-  // is (count - 1) / (cells * cell^D) (itself not counted: unbiased for a uniform gas)
-  CPS_HD void block_count(const Vec<D>& xi, int& count, int& cells) const {
-    int c[D];
-    spec.cell_of(xi, c);
-    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-    for (int k = 0; k < D; ++k) {
-      lo[k] = c[k] > 0 ? c[k] - 1 : 0;
-      hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
-    }
-    const uint64_t dx = uint64_t(spec.dims[0]);
-    const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
-    count = 0;
-    cells = 0;
-    for (int t = tag_begin; t < tag_end; ++t) {
-      const uint64_t tbase = uint64_t(t) * spec.ncells;
-      for (int z = lo[2]; z <= hi[2]; ++z)
-        for (int y = lo[1]; y <= hi[1]; ++y)
-          for (int x = lo[0]; x <= hi[0]; ++x) {
-            const uint64_t slot = tbase + uint64_t(z) * dxy + uint64_t(y) * dx + uint64_t(x);
-            count += int(cell_end[slot] - cell_start[slot]);
-            cells += t == tag_begin ? 1 : 0;
-          }
-    }
-  }
-
-  // the cell ranges [s, e) of sorted slots around xi's cell, in the walk's order: tags in
-  // order, then the cells (z, y, x, each from low to high; cells outside the grid skipped, so a
-  // grid narrower than three cells visits no cell twice); f(s, e) for each
+  // the cell table slots of the 3^D cells around xi's cell for tags [t0, t1): tags in order,
+  // then the cells (z, y, x, each from low to high; cells outside the grid skipped, so a grid
+  // narrower than three cells visits no cell twice); f(slot, tag) for each
   template <class F>
-  CPS_HD void for_each_cell_range(int i, const Vec<D>& xi, F&& f) const {
+  CPS_HD void for_each_block_slot(const Vec<D>& xi, int t0, int t1, F&& f) const {
     int c[D];
     spec.cell_of(xi, c);
     int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
     for (int k = 0; k < D; ++k) {
       lo[k] = c[k] > 0 ? c[k] - 1 : 0;
       hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
-    }
-    int t0 = tag_begin, t1 = tag_end;
-    if (own_tag) {
-      t0 = spec.tag_of_key(key(i));
-      t1 = t0 + 1;
     }
     const uint64_t dx = uint64_t(spec.dims[0]);
     const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
@@ -265,10 +233,34 @@ struct CellGridView {
       for (int z = lo[2]; z <= hi[2]; ++z) {
         for (int y = lo[1]; y <= hi[1]; ++y) {
           const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
-          for (int x = lo[0]; x <= hi[0]; ++x) f(cell_start[row + uint64_t(x)], cell_end[row + uint64_t(x)]);
+          for (int x = lo[0]; x <= hi[0]; ++x) f(row + uint64_t(x), t);
         }
       }
     }
+  }
+
+  // the slots in the 3^D cells around xi's cell (in the grid) of tags [tag_begin, tag_end),
+  // and how many cells that block has inside the grid: a particle's local number density
+  // is (count - 1) / (cells * cell^D) (itself not counted: unbiased for a uniform gas)
+  CPS_HD void block_count(const Vec<D>& xi, int& count, int& cells) const {
+    count = 0;
+    cells = 0;
+    for_each_block_slot(xi, tag_begin, tag_end, [&](uint64_t slot, int t) {
+      count += int(cell_end[slot] - cell_start[slot]);
+      cells += t == tag_begin ? 1 : 0;
+    });
+  }
+
+  // the cell ranges [s, e) of sorted slots around xi's cell, in for_each_block_slot's order,
+  // for tags [tag_begin, tag_end) (own_tag: slot i's tag); f(s, e) for each
+  template <class F>
+  CPS_HD void for_each_cell_range(int i, const Vec<D>& xi, F&& f) const {
+    int t0 = tag_begin, t1 = tag_end;
+    if (own_tag) {
+      t0 = spec.tag_of_key(key(i));
+      t1 = t0 + 1;
+    }
+    for_each_block_slot(xi, t0, t1, [&](uint64_t slot, int) { f(cell_start[slot], cell_end[slot]); });
   }
 
   // the cells' slots in for_each_cell_range's order, each cell's in sorted order
