@@ -7,11 +7,13 @@
 #   mkdir tmp_rec tmp_p2; git archive sphrecord | tar -x -C tmp_rec; git archive sphpair2 | tar -x -C tmp_p2
 #   for b in 10 12; do mkdir tmp_r$b; git archive sphrecord | tar -x -C tmp_r$b
 #     sed -i "s/kPairBlocksPerSM = 8;/kPairBlocksPerSM = $b;/" tmp_r$b/cpp/include/corpuscle/scenes/sph/pipeline.h; done
-# Built side by side; every gpu test of R and P2; the box at 129,600 and 1M and dam-break-dsph
+# Built side by side; every gpu test of M (main's last changes were compiled, not run on a GPU),
+# R and P2; the box at 129,600 and 1M and dam-break-dsph
 # on each, two rounds. (Remove the tmp_* trees before committing.)
 NAME=s19a SELF=m
 source benchmarks/_device_common.sh
 build_trees "rec r10 r12 p2"
+gpu_tests main 240 tests
 for t in rec p2; do
   say gpu tests $t
   (cd tmp_$t && PYTHONPATH=/tmp/t_$t timeout 150 python3 -m pytest -q -m gpu tests -p no:cacheprovider 2>&1) | tee "$OUT/gpu_tests_$t.log" | grep -v "^\.\+ *\[" | tail -3 | tee -a "$log"
