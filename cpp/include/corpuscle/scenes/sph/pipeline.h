@@ -53,8 +53,11 @@ struct ListsIndex {
 };
 
 // the pair stage's blocks per multiprocessor on CUDA (__launch_bounds__: 128 threads and 8
-// blocks leave 64 registers a thread; the cell walk's 72 gave 7 blocks, 44% occupancy)
+// blocks leave 64 registers a thread; the cell walk's 72 gave 7 blocks, 44% occupancy); the
+// `lists` pass's own: 10 blocks (51 registers). H200, 2026-12-03 (docs/benchmarks.md): 8 / 10 / 12
+// blocks 1,884 / 1,928 / 1,945 steps/s at 129,600 particles, 352 / 353 / 332 at 1,056,321
 constexpr int kPairBlocksPerSM = 8;
+constexpr int kListPairBlocksPerSM = 10;
 
 // the kinds this pipeline carries (their dimension and name)
 struct FluidBoxKind {
@@ -376,12 +379,12 @@ class Pipeline {
   void list_pass(const SlotListView<D>& lv, const InteractStage<D>& st) {
     if constexpr (G == 1) {
       using Fn = ListGatherFn<SlotListView<D>, InteractStage<D>>;
-      ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, Fn{lv, st, 0});
-      if (n_ > nf_) ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
+      ex_.template for_each_bounded<kListPairBlocksPerSM>(nf_, Fn{lv, st, 0});
+      if (n_ > nf_) ex_.template for_each_bounded<kListPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
     } else {
       using Fn = ListGatherLanesFn<G, SlotListView<D>, InteractStage<D>>;
-      ex_.template for_each_lanes_w_bounded<G, kPairBlocksPerSM>(nf_, Fn{lv, st, 0});
-      if (n_ > nf_) ex_.template for_each_lanes_w_bounded<G, kPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
+      ex_.template for_each_lanes_w_bounded<G, kListPairBlocksPerSM>(nf_, Fn{lv, st, 0});
+      if (n_ > nf_) ex_.template for_each_lanes_w_bounded<G, kListPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
     }
   }
 
