@@ -174,6 +174,7 @@ struct SlotListView {
   const int* nbr = nullptr;     // capacity * stride entries
   const int* counts = nullptr;  // stride entries: the neighbours found (may exceed capacity: overflow)
   const VecA<D>* pos = nullptr; // positions, numbered like the list's slots (padded: one vector load)
+  int pos_stride = 1;           // slot i's position at pos[i * pos_stride] (inside larger records)
   int n = 0;
   int capacity = 0;
   size_t stride = 0;
@@ -182,7 +183,7 @@ struct SlotListView {
 
   CPS_HD int size() const { return n; }
   CPS_HD bool active(int) const { return true; }
-  CPS_HD Vec<D> position(int i) const { return VecA<D>::load(pos + i); }
+  CPS_HD Vec<D> position(int i) const { return VecA<D>::load(pos + size_t(i) * pos_stride); }
   CPS_HD float max_radius() const { return list_radius; }
   CPS_HD SlotListView with_radius(float r) const {
     SlotListView v = *this;
@@ -225,7 +226,7 @@ struct SlotListView {
     // round starts the loads of the next, so a load's latency overlaps a round of work
     int j1 = k < c ? e[0] : -1;
     int j2 = k + kWidth < c ? e[step] : -1;
-    Vec<D> x1 = j1 >= 0 ? VecA<D>::load(pos + j1) : Vec<D>::zero();
+    Vec<D> x1 = j1 >= 0 ? position(j1) : Vec<D>::zero();
     for (;;) {
       int j = -1;
       Vec<D> d;
@@ -235,7 +236,7 @@ struct SlotListView {
         const Vec<D> xj = x1;
         j1 = j2;
         j2 = k + 2 * kWidth < c ? e[2 * step] : -1;
-        if (j1 >= 0) x1 = VecA<D>::load(pos + j1);
+        if (j1 >= 0) x1 = position(j1);
         k += kWidth;
         e += step;
         if (kPairs && jj <= i) continue;
@@ -360,9 +361,9 @@ class SlotNeighborList {
     }
   }
 
-  // the lists over positions `pos` (numbered like the source's slots), queried with radius
-  // (at most the list radius)
-  SlotListView<D> view(const VecA<D>* pos, float radius) const {
+  // the lists over positions `pos` (numbered like the source's slots; slot i's at
+  // pos[i * pos_stride]), queried with radius (at most the list radius)
+  SlotListView<D> view(const VecA<D>* pos, float radius, int pos_stride = 1) const {
     if (radius > list_radius_)
       throw Error("neighbour list: a query radius of " + std::to_string(radius) + " exceeds the list radius " +
                   std::to_string(list_radius_));
@@ -370,6 +371,7 @@ class SlotNeighborList {
     v.nbr = nbr_.data();
     v.counts = counts_.data();
     v.pos = pos;
+    v.pos_stride = pos_stride;
     v.n = n_;
     v.capacity = capacity_;
     v.stride = stride_;

@@ -152,7 +152,7 @@ struct Scene {
 
 // what the pair loop reads of a neighbour j besides its position, packed for one vector load
 // each (the same values as the arrays they come from): velocity (3-D; 2-D: the first two) and
-// p / rho^2 in 16 bytes, rho and m / rho in 8 (2-D; 3-D: rho in the padding of pos4)
+// p / rho^2 in 16 bytes, rho and m / rho in 8 (2-D; 3-D: rho in the padding of the record's position)
 struct alignas(16) PairVel {
   float v[3];
   float pr2;
@@ -160,6 +160,15 @@ struct alignas(16) PairVel {
 struct alignas(8) PairRho {
   float rho, vol;
 };
+// a neighbour's record in the pair loop: its padded position (3-D: rho in the fourth float) and
+// its PairVel in one 32-byte sector, so the position the walk loads brings the rest with it (one
+// sector a neighbour, not one from each of two arrays)
+template <int D>
+struct alignas(32) PairRecord {
+  VecA<D> x;
+  PairVel pv;
+};
+static_assert(sizeof(PairRecord<3>) == 32 && sizeof(PairRecord<2>) == 32, "a record is one 32-byte sector");
 
 // structure of arrays (slots in sorted order; *_alt: the other buffers)
 template <int D>
@@ -170,10 +179,10 @@ struct Arrays {
   float *rhom, *rhom_alt;   // the previous step's density (Verlet)
   int *id, *id_alt;
   float* prs;        // pressure of the sorted state (from rho by Tait)
-  PairVel* pv;       // the pair loop's velocity and p / rho^2 of the sorted state
+  PairRecord<D>* rec;  // the pair loop's neighbour records of the sorted state: the position
+                       // padded for one vector load (the lists' walk; 3-D: the density in the
+                       // fourth float, the pair loop's rho_j), velocity and p / rho^2
   PairRho* pr;       // 2-D: the pair loop's rho and m / rho (the density diffusion's V_j)
-  VecA<D>* pos4;     // the sorted positions padded for one vector load (the lists' walk); 3-D:
-                     // the density in the fourth float (the pair loop's rho_j)
   Vec<D>* x_build;   // `lists`: positions at the last build (sorted slots; null for other indexes)
   Vec<D>* acc;       // dv/dt (fluid; zero for walls)
   float* drho;       // drho/dt

@@ -125,7 +125,7 @@ class Pipeline {
   static double bytes_needed(const ModelT& m) {
     const double n = double(m.n_fluid) + double(m.n_wall);
     const double per = 2 * (3 * sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int)) + sizeof(float) + sizeof(Vec<D>) +
-                       sizeof(PairVel) + (D == 2 ? sizeof(PairRho) : 0) + sizeof(VecA<D>) +
+                       sizeof(PairRecord<D>) + (D == 2 ? sizeof(PairRho) : 0) +
                        sizeof(float) + sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
                        (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
@@ -154,9 +154,8 @@ class Pipeline {
       id_[p].resize(n_);
     }
     prs_.resize(n_);
-    pv_.resize(n_);
-    if constexpr (D == 2) pr_.resize(n_);  // (3-D: rho_j rides in pos4)
-    pos4_.resize(n_);
+    rec_.resize(n_);
+    if constexpr (D == 2) pr_.resize(n_);  // (3-D: rho_j rides in the record's position)
     if constexpr (kLists) {
       if (!(m.list_radius >= m.h) || !(m.rebuild_disp2 >= 0.0f) || m.max_neighbors < 1)
         throw Error(std::string(kind) + ": lists need list_radius >= h, rebuild_distance >= 0 and max_neighbors >= 1");
@@ -269,7 +268,9 @@ class Pipeline {
     // 2. the pair sums through the index
     InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
     if constexpr (kLists) {
-      const SlotListView<D> lv = lists_.view(s.pos4, m_.h);
+      // (the walk reads the records' positions: the first member, a record apart)
+      constexpr int stride = int(sizeof(PairRecord<D>) / sizeof(VecA<D>));
+      const SlotListView<D> lv = lists_.view(reinterpret_cast<const VecA<D>*>(s.rec), m_.h, stride);
       switch (m_.lanes) {
         case 2: list_pass<2>(lv, st); break;
         case 4: list_pass<4>(lv, st); break;
@@ -403,9 +404,8 @@ class Pipeline {
     a.id = id_[cur].data();
     a.id_alt = id_[nxt].data();
     a.prs = prs_.data();
-    a.pv = pv_.data();
+    a.rec = rec_.data();
     a.pr = D == 2 ? pr_.data() : nullptr;
-    a.pos4 = pos4_.data();
     a.x_build = kLists ? x_build_.data() : nullptr;
     a.acc = acc_.data();
     a.drho = drho_.data();
@@ -424,9 +424,8 @@ class Pipeline {
   Buf<float> rho_[2], rhom_[2];
   Buf<int> id_[2];
   Buf<float> prs_, drho_;
-  Buf<PairVel> pv_;
+  Buf<PairRecord<D>> rec_;
   Buf<PairRho> pr_;
-  Buf<VecA<D>> pos4_;
   Buf<Vec<D>> x_build_;
   SlotNeighborList<D, Exec> lists_;
   bool relist_ = false;

@@ -44,11 +44,10 @@ struct ReorderStage {
     PairVel pv;
     for (int k = 0; k < 3; ++k) pv.v[k] = k < D ? v[k] : 0.0f;
     pv.pr2 = p / (rho * rho);
-    a.pv[j] = pv;
     VecA<D> x4 = VecA<D>::of(x);
     if constexpr (D == 3) x4.v[3] = rho;  // (the pair loop's rho_j: see InteractStage::visit)
     else a.pr[j] = PairRho{rho, model->mass / rho};
-    a.pos4[j] = x4;
+    a.rec[j] = PairRecord<D>{x4, pv};
     if (rebuild && *rebuild) a.x_build[j] = x;
   }
 };
@@ -112,7 +111,7 @@ struct InteractStage {
     s.nbrs = 0;
     s.vel_i = a.vel[i];
     s.rho_i = a.rho[i];
-    s.pr2_i = a.pv[i].pr2;
+    s.pr2_i = a.rec[i].pv.pr2;
     return s;
   }
 
@@ -123,7 +122,7 @@ struct InteractStage {
     if (!fi && !fj) return;
     const float r = fsqrt_fast(r2);
     const Vec<D> gw = m.kern.grad(d, r);
-    const PairVel pv = a.pv[j];  // (one vector load each)
+    const PairVel pv = a.rec[j].pv;  // (one vector load, from the sector the walk loaded)
     Vec<D> dv;
     for (int k = 0; k < D; ++k) dv[k] = s.vel_i[k] - pv.v[k];
     s.drho += m.mass * dot(dv, gw);
@@ -135,7 +134,7 @@ struct InteractStage {
     // come from PairRho
     float rho_j, vol_j;
     if constexpr (D == 3) {
-      rho_j = a.pos4[j].v[3];
+      rho_j = a.rec[j].x.v[3];
       vol_j = m.mass / rho_j;
     } else {
       const PairRho pr = a.pr[j];
