@@ -22,5 +22,5 @@ say round 2
 bench_on 131072 "m cb" "${BOX129[@]}"
 bench_on dsph "m cb" "${DSPH[@]}"
 say sweep
-PYTHONPATH=/tmp/t_cb timeout $((570 - SECONDS)) python3 benchmarks/fluid_box_sweep.py --out "$OUT/sweep" --max-step 0.3 2>&1 | tee "$OUT/sweep.log" | tail -n 60
+PYTHONPATH=/tmp/t_cb timeout $((570 - SECONDS)) python3 benchmarks/fluid_box_sweep.py --out "$OUT/sweep" --max-step 0.1 2>&1 | tee "$OUT/sweep.log" | tail -n 60
 say done
