@@ -1,5 +1,5 @@
-"""The fluid-box sweep of issue 9 (seed 002's tables): particles in powers of 4 from 128
-(to 4,194,304 on the GPU) x {serial allpairs, serial grid, OpenMP grid, CUDA allpairs, CUDA
+"""The fluid-box sweep of issue 9 (seed 002's tables): 128 particles, then powers of 4 from 256 to
+1,048,576 (and 4,194,304 on the GPU) x {serial allpairs, serial grid, OpenMP grid, CUDA allpairs, CUDA
 grid, CUDA compact, CUDA lists}, through `corpuscle bench --json`, with the mean neighbour count and the
 per-stage times (CUDA events) beside every figure; then the seed's speedup tables (over
 serial and over OpenMP) and a PNG plot. All-pairs rows stop where one step would take longer
@@ -47,7 +47,8 @@ def main() -> int:
     args = ap.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    sizes = [128 * 4 ** k for k in range(12) if 128 * 4 ** k <= args.max_particles]
+    # 128, then the powers of 4 from 256 to 1,048,576 (and 4,194,304 on the GPU)
+    sizes = [n for n in [128] + [4 ** k for k in range(4, 12)] if n <= args.max_particles]
     rows = []
     for backend, index in CONFIGS:
         if args.cpu_only and backend == "cuda":
