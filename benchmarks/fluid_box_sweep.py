@@ -61,7 +61,7 @@ def main() -> int:
             step_s = 1.0 / prev[-1]["steps_per_second"] if prev else 0.0
             if prev and step_s * 4 * (4 if index == "allpairs" else 1) > args.max_step:
                 break
-            steps = 200 if backend == "cuda" else (50 if step_s < 0.005 else 10)
+            steps = (200 if step_s < 0.01 else 20) if backend == "cuda" else (50 if step_s < 0.005 else 10)
             extra = ["--stages"] if args.stages and backend != "cuda" else []
             r = bench(args.scene, backend, index, n, steps, 3, out, extra)
             if r is None:
