@@ -271,6 +271,9 @@ def test_validate_bad_input():
     assert_one_line_error(corpuscle("validate", "nonsense"), "nonsense")
     assert_one_line_error(corpuscle("validate", "hydrostatic", "--particles", "-5"), "--particles")
     assert_one_line_error(corpuscle("validate", "dam-break", "--bogus"), "--bogus")
+    # a plot that cannot be written is refused before the runs, not after them
+    assert_one_line_error(corpuscle("validate", "dam-break", "--plot", "/nonexistent-folder/front.png", timeout=30),
+                          "/nonexistent-folder")
 
 
 def test_run_cli_dam_break_2d(tmp_path):

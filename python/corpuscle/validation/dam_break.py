@@ -70,6 +70,10 @@ def _run(dim: int, particles: int, args) -> dict:
 
 def run(args) -> list[Check]:
     n = positive_int("--particles", args.particles)
+    if args.plot and args.plot != "none":  # (before the runs: a bad path is not found after them)
+        from .._viz_common import check_file_output
+
+        check_file_output(args.plot, ValueError)
     plan: list[tuple[int, int]] = []
     if args.full:
         plan = [(2, 3200), (2, 12800), (3, 8000)]
