@@ -246,3 +246,46 @@ def test_cuda_lists_grow_on_overflow(monkeypatch):
     sim = small("fluid-box", backend="cuda", neighbors="lists", particles=4000)
     assert sim.step(40) == 40
     np.testing.assert_array_equal(by_id(sim, "position"), by_id(ref, "position"))
+
+
+def _runtime_terms(mp, kind):
+    """Build `kind` with fixed_terms = 0: the pair pass dispatches its terms per pair."""
+    from corpuscle.kinds import get
+
+    k = get(kind)
+    build = k.build
+
+    def runtime_build(*a, **kw):
+        built = build(*a, **kw)
+        built.params["fixed_terms"] = 0
+        return built
+
+    mp.setattr(k, "build", runtime_build)
+
+
+@pytest.mark.parametrize("backend", ["serial", "cpu"])
+@pytest.mark.parametrize("kind", list(KINDS))
+@pytest.mark.parametrize("lanes", (1, 4))
+def test_fixed_default_terms_are_the_runtime_terms_bit_for_bit(kind, lanes, backend, monkeypatch):
+    # the default model (Wendland C2, artificial viscosity, Fourtakas) runs the CPU's pair pass
+    # with its terms fixed at compile time; with fixed_terms = 0 it dispatches them per pair: the
+    # same functions, so the same sums and the same run
+    runs = {}
+    for fixed in (1, 0):
+        with monkeypatch.context() as mp:
+            if not fixed:
+                _runtime_terms(mp, kind)
+            sim = stirred_by_id(small(kind, backend=backend, neighbors="lists", sph__lanes=lanes))
+            assert sim.core.scalars()["fixed_terms"] == fixed
+            sim.evaluate()
+            out = [by_id(sim, n) for n in ("acceleration", "density_rate")]
+            sim.step(30)
+            runs[fixed] = out + [by_id(sim, n) for n in ("position", "velocity", "density")]
+    for name, a, b in zip(("acceleration", "density_rate", "position", "velocity", "density"), runs[1], runs[0]):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    assert np.abs(runs[1][1]).max() > 0  # (the diffusion and the pair terms did something)
+
+
+def test_other_models_dispatch_their_terms():
+    for over in ({"sph__kernel": "cubic-spline"}, {"sph__viscosity": "laminar"}, {"sph__diffusion": "molteni"}):
+        assert small("dam-break-2d", neighbors="lists", **over).core.scalars()["fixed_terms"] == 0, over

@@ -168,15 +168,31 @@ CPS_HD CPS_INLINE float fourtakas_rho_h(const DensityDiffusion& p, float z_ij) {
   return 0.5f * p.rho0 * (up - dn);
 }
 
-// with inv_den = 1 / (r^2 + p.eta2) and V_j = m_j / rho_j given (what a pair loop has at hand)
+// with inv_den = 1 / (r^2 + p.eta2) and V_j = m_j / rho_j given (what a pair loop has at hand),
+// the kind K fixed at compile time (p.kind is not read) ...
+template <int D, DensityDiffusionKind K>
+CPS_HD CPS_INLINE float density_diffusion_rate_k(const DensityDiffusion& p, const Vec<D>& d, float inv_den,
+                                                 float rho_i, float rho_j, float vol_j, const Vec<D>& gradW) {
+  if constexpr (K == DensityDiffusionKind::None) {
+    return 0.0f;
+  } else {
+    float drho = rho_j - rho_i;
+    if constexpr (K == DensityDiffusionKind::Fourtakas) drho -= fourtakas_rho_h(p, d[D - 1]);
+    // r_ji . grad_i W_ij = -d . gradW >= 0
+    return p.coeff * drho * (-dot(d, gradW)) * inv_den * vol_j;
+  }
+}
+// ... or p.kind's
 template <int D>
 CPS_HD CPS_INLINE float density_diffusion_rate_v(const DensityDiffusion& p, const Vec<D>& d, float inv_den,
                                                  float rho_i, float rho_j, float vol_j, const Vec<D>& gradW) {
-  if (p.kind == DensityDiffusionKind::None) return 0.0f;
-  float drho = rho_j - rho_i;
-  if (p.kind == DensityDiffusionKind::Fourtakas) drho -= fourtakas_rho_h(p, d[D - 1]);
-  // r_ji . grad_i W_ij = -d . gradW >= 0
-  return p.coeff * drho * (-dot(d, gradW)) * inv_den * vol_j;
+  switch (p.kind) {
+    case DensityDiffusionKind::None: return 0.0f;
+    case DensityDiffusionKind::Fourtakas:
+      return density_diffusion_rate_k<D, DensityDiffusionKind::Fourtakas>(p, d, inv_den, rho_i, rho_j, vol_j, gradW);
+    default:
+      return density_diffusion_rate_k<D, DensityDiffusionKind::Molteni>(p, d, inv_den, rho_i, rho_j, vol_j, gradW);
+  }
 }
 
 template <int D>

@@ -79,6 +79,7 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
   if (m.lanes != 0 && m.lanes != 1 && m.lanes != 2 && m.lanes != 4 && m.lanes != 8)
     throw Error(std::string(kind) + ": lanes must be 0 (automatic), 1, 2, 4 or 8, got " + std::to_string(p.integer("lanes")));
+  m.fixed_terms = p.has("fixed_terms") ? int(p.integer("fixed_terms")) : 1;
   auto probes = p.numbers("probes");
   if (probes.size() % D != 0) throw Error(std::string(kind) + ": probes need " + std::to_string(D) + " numbers each");
   m.n_probes = int(probes.size() / D);

@@ -86,7 +86,22 @@ struct PairConsts {
   }
 };
 
-template <int D>
+// the pair terms' choices: the model's, read per pair (RuntimeTerms: any model), or fixed at
+// compile time to the default model's (DefaultTerms: Wendland C2, artificial viscosity,
+// Fourtakas diffusion), which calls the same functions without the dispatch in the pair loop
+struct RuntimeTerms {
+  static constexpr bool kFixed = false;
+};
+struct DefaultTerms {
+  static constexpr bool kFixed = true;
+  template <int D>
+  static bool matches(const Model<D>& m) {
+    return m.kernels.gradient.kind == SphKernelKind::WendlandC2 && m.viscosity == kArtificialViscosity &&
+           m.dd.kind == DensityDiffusionKind::Fourtakas;
+  }
+};
+
+template <int D, class Terms = RuntimeTerms>
 struct InteractStage {
   PairConsts<D> m;
   const Control* ctl;
@@ -121,7 +136,9 @@ struct InteractStage {
     const bool fi = i < nf, fj = j < nf;
     if (!fi && !fj) return;
     const float r = fsqrt_fast(r2);
-    const Vec<D> gw = m.kern.grad(d, r);
+    Vec<D> gw;
+    if constexpr (Terms::kFixed) gw = KernelFormula<D, SphKernelKind::WendlandC2>::grad(m.kern.k, d, r);
+    else gw = m.kern.grad(d, r);
     const PairVel pv = a.rec[j].pv;  // (one vector load, from the sector the walk loaded)
     Vec<D> dv;
     for (int k = 0; k < D; ++k) dv[k] = s.vel_i[k] - pv.v[k];
@@ -149,11 +166,16 @@ struct InteractStage {
     const float vr = dot(dv, d);
     const float mu = sph_mu_inv(m.hs, vr, inv_den);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) s.drho += density_diffusion_rate_v<D>(m.dd, d, inv_den, rho_i, rho_j, vol_j, gw);
+    if (fj) {
+      if constexpr (Terms::kFixed)
+        s.drho += density_diffusion_rate_k<D, DensityDiffusionKind::Fourtakas>(m.dd, d, inv_den, rho_i, rho_j, vol_j, gw);
+      else
+        s.drho += density_diffusion_rate_v<D>(m.dd, d, inv_den, rho_i, rho_j, vol_j, gw);
+    }
     // p_i / rho_i^2 + p_j / rho_j^2 (each computed once per particle, in the reorder)
     const float pterm = s.pr2_i + pv.pr2;
     s.acc -= gw * (m.mass * pterm);
-    if (m.viscosity == kArtificialViscosity)
+    if (Terms::kFixed || m.viscosity == kArtificialViscosity)
       s.acc += artificial_viscosity_acc_mu<D>(m.av, vr, mu, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
     else
       s.acc += laminar_viscosity_acc_den<D>(m.lv, d, dv, den, rho_i, rho_j, m.mass, gw);
