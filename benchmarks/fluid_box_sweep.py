@@ -20,6 +20,8 @@ import pathlib
 import subprocess
 import sys
 
+from corpuscle import _bench_report
+
 CONFIGS = [("serial", "allpairs"), ("serial", "grid"), ("cpu", "grid"),
            ("cuda", "allpairs"), ("cuda", "grid"), ("cuda", "compact"), ("cuda", "lists")]
 
@@ -77,33 +79,8 @@ def main() -> int:
 
 
 def tables(rows, path):
-    sizes = sorted({r["fluid_target"] if "fluid_target" in r else r["particles"] for r in rows})
-    cols = [(b, i) for b, i in CONFIGS if any(r["backend"] == b and r["neighbors"] == i for r in rows)]
-
-    def get(b, i, n):
-        return next((r for r in rows if r["backend"] == b and r["neighbors"] == i and r["particles"] == n), None)
-
-    lines = ["| fluid particles | neighbours | " + " | ".join(f"{b} {i} (steps/s)" for b, i in cols) + " |",
-             "|---:|---:|" + "---:|" * len(cols)]
-    for n in sizes:
-        nb = next((r.get("mean_neighbors") for r in rows if r["particles"] == n and r.get("mean_neighbors")), None)
-        cells = []
-        for b, i in cols:
-            r = get(b, i, n)
-            cells.append(f"{r['steps_per_second']:.4g}" if r else "")
-        lines.append(f"| {n:,} | {nb:.0f} | " + " | ".join(cells) + " |" if nb else f"| {n:,} | | " + " | ".join(cells) + " |")
-    for ref_b, ref_i, title in (("serial", "grid", "speedup over serial grid"), ("cpu", "grid", "speedup over OpenMP grid")):
-        lines += ["", f"{title}:", "", "| fluid particles | " + " | ".join(f"{b} {i}" for b, i in cols) + " |",
-                  "|---:|" + "---:|" * len(cols)]
-        for n in sizes:
-            base = get(ref_b, ref_i, n)
-            if not base:
-                continue
-            cells = []
-            for b, i in cols:
-                r = get(b, i, n)
-                cells.append(f"{r['steps_per_second'] / base['steps_per_second']:.3g}x" if r else "")
-            lines.append(f"| {n:,} | " + " | ".join(cells) + " |")
+    """The steps/s table, the seed's speedup tables and the stage times (corpuscle._bench_report)."""
+    lines = _bench_report.steps_table(rows) + [""] + _bench_report.speedup_tables(rows)
     stage_rows = [r for r in rows if r.get("stages")]
     if stage_rows:
         lines += ["", "stages (ms per step):", ""]
@@ -115,24 +92,7 @@ def tables(rows, path):
 
 
 def plot(rows, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for b, i in CONFIGS:
-        rs = sorted((r for r in rows if r["backend"] == b and r["neighbors"] == i), key=lambda r: r["particles"])
-        if rs:
-            ax.loglog([r["particles"] for r in rs], [r["particle_steps_per_second"] for r in rs], "-o", ms=3,
-                      label=f"{b} {i}")
-    ax.set_xlabel("fluid particles")
-    ax.set_ylabel("particle-steps per second")
-    ax.set_title("corpuscle fluid-box")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    _bench_report.plot(rows, path, title="corpuscle fluid-box")
 
 
 if __name__ == "__main__":

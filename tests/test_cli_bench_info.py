@@ -138,3 +138,47 @@ def test_bench_batches_report_scene_and_particle_steps(tmp_path, capsys):
     assert "--batch must be a positive integer, got 0" in capsys.readouterr().err
     assert main(["bench", "wind-tunnel", "--batch", "2", "--backend", "serial"]) == 2
     assert "--batch: batches of scenes are magic8ball scenes" in capsys.readouterr().err
+
+
+SWEEP = ["bench", "fluid-box", "--backend", "serial", "cpu", "--neighbors", "allpairs", "grid",
+         "--particles", "128", "512", "--steps", "2", "--repeats", "1", "--warmup", "0", "--no-progress"]
+
+
+def test_bench_sweep_speedup_tables_plot_and_max_step(tmp_path, capsys):
+    # seed 002's tables: every backend and index over serial grid and over OpenMP grid at each size
+    out, png = tmp_path / "rows.json", tmp_path / "sweep.png"
+    assert main(SWEEP + ["--json", str(out), "--plot", str(png)]) == 0
+    rows = json.loads(out.read_text())
+    text = capsys.readouterr().out
+    sizes = sorted({r["particles"] for r in rows})
+    assert len(rows) == 8 and len(sizes) == 2
+    assert "speedup over serial grid:" in text and "speedup over OpenMP grid:" in text
+    over_serial = text.split("speedup over serial grid:")[1].split("speedup over OpenMP grid:")[0]
+    line = next(ln for ln in over_serial.splitlines() if ln.startswith(f"| {sizes[1]:,} |"))
+    cells = [c.strip() for c in line.strip("|").split("|")][1:]
+    sps = {(r["backend"], r["neighbors"]): r["steps_per_second"] for r in rows if r["particles"] == sizes[1]}
+    base = sps[("serial", "grid")]
+    want = [sps[c] / base for c in (("serial", "allpairs"), ("cpu", "allpairs"), ("serial", "grid"), ("cpu", "grid"))]
+    assert [float(c.rstrip("x")) for c in cells] == pytest.approx(want, rel=2e-3)
+    assert png.stat().st_size > 1000 and png.read_bytes()[:4] == b"\x89PNG"
+    # --max-step: all pairs at 512 would take 16 times its step at 128 (O(N^2)): left out when
+    # that passes the limit, while the grid (O(N)) stays
+    t128 = next(r for r in rows if r["particles"] == sizes[0] and r["neighbors"] == "allpairs"
+                and r["backend"] == "serial")["seconds"][0] / 2
+    limit = 4 * t128  # (a margin of 4 for the two runs' timings)
+    out2 = tmp_path / "rows2.json"
+    assert main(SWEEP + ["--backend", "serial", "--json", str(out2), "--max-step", f"{limit:.6g}"]) == 0
+    got = {(r["neighbors"], r["particles"]) for r in json.loads(out2.read_text())}
+    assert ("allpairs", sizes[1]) not in got and ("allpairs", sizes[0]) in got and ("grid", sizes[1]) in got
+    assert "left out: serial allpairs at 512" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("bad, words", [(["--max-step", "0"], "--max-step"), (["--max-step", "soon"], "--max-step"),
+                                        (["--plot", "/nonexistent-dir/p.png"], "/nonexistent-dir")])
+def test_bench_sweep_bad_options_refused_before_running(bad, words):
+    from cli_script import assert_one_line_error
+
+    t0 = time.perf_counter()
+    proc = subprocess.run(corpuscle_command() + SWEEP + bad, capture_output=True, text=True, timeout=60)
+    assert_one_line_error(proc, words)
+    assert time.perf_counter() - t0 < 30

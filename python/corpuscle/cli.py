@@ -1054,6 +1054,11 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
                    help="time batches of B independent scenes stepped together (magic8ball; several values: a sweep); "
                         "reports scene-steps/s and particle-steps/s")
     p.add_argument("--json", metavar="FILE", help="also write the results as a JSON list of rows to FILE")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="also plot particle-steps/s against particles, a line for each backend and index (PNG)")
+    p.add_argument("--max-step", metavar="SECONDS",
+                   help="in a sweep over --particles, leave out a backend and index's larger sizes once a step "
+                        "there would take longer than this (from its last size: O(N), all pairs O(N^2))")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -1082,6 +1087,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     batches = [_int_option("--batch", b, minimum=1) for b in args.batch] if args.batch else [None]
     if args.batch and scene.kind != "magic8ball":
         raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
+    max_step = None
+    if args.max_step is not None:
+        try:
+            max_step = float(args.max_step)
+        except ValueError:
+            max_step = float("nan")
+        if not (max_step > 0.0 and math.isfinite(max_step)):
+            raise UsageError(f"--max-step must be a positive number of seconds, got {args.max_step!r}")
+    if args.plot is not None:
+        from ._viz_common import check_file_output
+
+        check_file_output(args.plot, UsageError)
     if args.json is not None:
         # checked before the benchmark runs, not after it has taken minutes
         if not args.json.strip():
@@ -1107,9 +1124,21 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         bar = tqdm(total=len(backends) * repeats * len(scenes) * len(indexes) * len(batches), unit="repeat",
                    file=sys.stderr, leave=False)
     rows: list[dict[str, Any]] = []
-    runs = [(sc, idx, b, B) for sc in scenes for idx in indexes for b in backends for B in batches]
+    runs = [(sz, sc, idx, b, B) for sz, sc in zip(sizes, scenes) for idx in indexes for b in backends for B in batches]
+    last: dict[tuple, tuple[int, float]] = {}  # (index, backend, batch) -> (size, seconds a step) of its last row
+    left_out: list[str] = []
     try:
-        for scene, index, backend, batch in runs:
+        for size, scene, index, backend, batch in runs:
+            config = (index, backend, batch)
+            if max_step is not None and size is not None and config in last:
+                n0, t0 = last[config]
+                power = 2 if index == "allpairs" else 1
+                guess = t0 * (size / n0) ** power if size > n0 else t0
+                if guess > max_step:
+                    left_out.append(f"{backend} {index or ''} at {size:,} (a step ~{guess:.3g} s > --max-step {max_step:g})")
+                    if bar is not None:
+                        bar.update(repeats)
+                    continue
             if bar is not None:
                 bar.set_description(backend if batch is None else f"{backend} B={batch}")
             t_init = time.perf_counter()
@@ -1131,6 +1160,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 if bar is not None:
                     bar.update(1)
             median = statistics.median(times)
+            if size is not None:
+                last[config] = (size, median / steps)
             n = int(sim.n_particles)
             sps = steps / median if median > 0 else float("inf")
             row: dict[str, Any] = {
@@ -1178,6 +1209,19 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise UsageError(f"cannot write {args.json}: {exc.strerror or _one_line(exc)}") from None
     _print_bench(rows)
+    from . import _bench_report
+
+    if len({r["particles"] for r in rows}) > 1 and (tables := _bench_report.speedup_tables(rows)):
+        print()
+        print("\n".join(tables))
+    for note in left_out:
+        print(f"left out: {note}")
+    if args.plot:
+        try:
+            _bench_report.plot(rows, args.plot, title=f"corpuscle {scene.name}")
+        except OSError as exc:
+            raise UsageError(f"cannot write {args.plot}: {exc.strerror or _one_line(exc)}") from None
+        print(f"plot: {args.plot}")
     return EXIT_OK
 
 
