@@ -1297,7 +1297,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     sub.add_argument("--json", action="store_true", help="print the checks as JSON (and nothing else) on stdout")
     module.add_arguments(sub)
     opts = sub.parse_args(args.options)  # bad options exit 2 with one line
-    checks = module.run(opts)
+    if args.json or opts.json:  # the JSON alone on stdout: the runs' own tables go to stderr
+        with contextlib.redirect_stdout(sys.stderr):
+            checks = module.run(opts)
+    else:
+        checks = module.run(opts)
     ok = all(c.passed for c in checks) and bool(checks)
     if args.json or opts.json:
         print(json.dumps(validation.as_dicts(checks), indent=2, default=_json_default))
