@@ -159,7 +159,8 @@ def test_bench_sweep_speedup_tables_plot_and_max_step(tmp_path, capsys):
     sps = {(r["backend"], r["neighbors"]): r["steps_per_second"] for r in rows if r["particles"] == sizes[1]}
     base = sps[("serial", "grid")]
     want = [sps[c] / base for c in (("serial", "allpairs"), ("cpu", "allpairs"), ("serial", "grid"), ("cpu", "grid"))]
-    assert [float(c.rstrip("x")) for c in cells] == pytest.approx(want, rel=2e-3)
+    # (the table prints three significant digits: within half a unit of the third, 0.5%)
+    assert [float(c.rstrip("x")) for c in cells] == pytest.approx(want, rel=5.01e-3)
     assert png.stat().st_size > 1000 and png.read_bytes()[:4] == b"\x89PNG"
     # --max-step: all pairs at 512 would take 16 times its step at 128 (O(N^2)): left out when
     # that passes the limit, while the grid (O(N)) stays
