@@ -6,6 +6,7 @@
 #   bench_on LABEL "T ..." ARGS   `corpuscle bench ARGS --backend cuda` on each tree, its rows
 #                           in the log and the whole output (stage times) in bench_full.log
 #   gpu_tests LABEL LIMIT PATHS   this tree's gpu tests
+#   tree_gpu_tests T LIMIT  every gpu test of ./tmp_T, run from it on its install in /tmp/t_T
 #   BOX129 BOX1M DSPH       the SPH box at 129,600 and 1,056,321 and dam-break-dsph, as bench ARGS
 set -uo pipefail
 export PYTHONUNBUFFERED=1
@@ -31,6 +32,12 @@ gpu_tests() {
   local label=$1 limit=$2; shift 2
   say gpu tests $label
   timeout $limit python3 -m pytest -q -m gpu "$@" -p no:cacheprovider 2>&1 | tee "$OUT/gpu_tests_$label.log" | grep -v "^\.\+ *\[" | tail -5 | tee -a "$log"
+}
+tree_gpu_tests() {
+  local t=$1 limit=$2
+  say gpu tests $t
+  (cd tmp_$t && PYTHONPATH=/tmp/t_$t timeout $limit python3 -m pytest -q -m gpu tests -p no:cacheprovider 2>&1) |
+    tee "$OUT/gpu_tests_$t.log" | grep -v "^\.\+ *\[" | tail -3 | tee -a "$log"
 }
 BOX129=(fluid-box --particles 131072 --steps 200 --repeats 3)
 BOX1M=(fluid-box --particles 1048576 --steps 50 --repeats 3 --warmup 10)

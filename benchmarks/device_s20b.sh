@@ -7,8 +7,7 @@
 NAME=s20b SELF=m
 source benchmarks/_device_common.sh
 build_trees "rec"
-say gpu tests rec
-(cd tmp_rec && PYTHONPATH=/tmp/t_rec timeout 150 python3 -m pytest -q -m gpu tests -p no:cacheprovider 2>&1) | tee "$OUT/gpu_tests_rec.log" | grep -v "^\.\+ *\[" | tail -3 | tee -a "$log"
+tree_gpu_tests rec 150
 for s in 0.1 0.05 0.03 0.07; do
   bench_on "131072 skin=$s" "m rec" "${BOX129[@]}" --set sph.skin=$s
   bench_on "dsph skin=$s" "m rec" "${DSPH[@]}" --set sph.skin=$s

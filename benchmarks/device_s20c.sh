@@ -8,8 +8,7 @@
 NAME=s20c SELF=m
 source benchmarks/_device_common.sh
 build_trees "cb"
-say gpu tests cb
-(cd tmp_cb && PYTHONPATH=/tmp/t_cb timeout 120 python3 -m pytest -q -m gpu tests -p no:cacheprovider 2>&1) | tee "$OUT/gpu_tests_cb.log" | grep -v "^\.\+ *\[" | tail -3 | tee -a "$log"
+tree_gpu_tests cb 120
 bench_on 131072 "m cb" "${BOX129[@]}"
 bench_on dsph "m cb" "${DSPH[@]}"
 bench_on 1M "m cb" "${BOX1M[@]}"

@@ -11,8 +11,7 @@
 NAME=s21a SELF=m
 source benchmarks/_device_common.sh
 build_trees "fx"
-say gpu tests fx
-(cd tmp_fx && PYTHONPATH=/tmp/t_fx timeout 150 python3 -m pytest -q -m gpu tests -p no:cacheprovider 2>&1) | tee "$OUT/gpu_tests_fx.log" | grep -v "^\.\+ *\[" | tail -3 | tee -a "$log"
+tree_gpu_tests fx 150
 bench_on 131072 "m fx" "${BOX129[@]}"
 bench_on dsph "m fx" "${DSPH[@]}"
 bench_on 1M "m fx" "${BOX1M[@]}"

@@ -13,9 +13,14 @@ Row = dict[str, Any]
 _NAMES = {"serial": "serial", "cpu": "OpenMP", "cuda": "CUDA"}
 
 
+def _config(row: Row) -> tuple[str, str]:
+    """A row's (backend, index)."""
+    return row["backend"], str(row.get("neighbors"))
+
+
 def configurations(rows: Sequence[Row]) -> list[tuple[str, str]]:
     """(backend, index) pairs in the order they first appear."""
-    return list(dict.fromkeys((r["backend"], str(r.get("neighbors"))) for r in rows))
+    return list(dict.fromkeys(_config(r) for r in rows))
 
 
 def _label(config: tuple[str, str]) -> str:
@@ -28,7 +33,7 @@ def _sizes(rows: Sequence[Row]) -> list[int]:
 
 
 def _get(rows: Sequence[Row], config: tuple[str, str], n: int) -> Row | None:
-    return next((r for r in rows if (r["backend"], str(r.get("neighbors"))) == config and r["particles"] == n), None)
+    return next((r for r in rows if _config(r) == config and r["particles"] == n), None)
 
 
 def _reference_index(rows: Sequence[Row]) -> str:
@@ -91,7 +96,7 @@ def plot(rows: Sequence[Row], path, title: str = "") -> None:
     fig, ax = plt.subplots(figsize=(7, 4.5))
     try:
         for c in configurations(rows):
-            rs = sorted((r for r in rows if (r["backend"], str(r.get("neighbors"))) == c), key=lambda r: r["particles"])
+            rs = sorted((r for r in rows if _config(r) == c), key=lambda r: r["particles"])
             ax.loglog([r["particles"] for r in rs], [r["particle_steps_per_second"] for r in rs], "-o", ms=3,
                       label=_label(c))
         ax.set_xlabel("particles")

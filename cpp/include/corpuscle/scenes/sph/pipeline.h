@@ -97,8 +97,8 @@ inline int auto_list_lanes(int n_fluid) {
 constexpr int kListFillLanes = 8;
 
 // the `lists` pair pass with the default model's terms fixed at compile time (DefaultTerms) on
-// CUDA too: off until it is timed there (the CPU backends take it: serial +5 to +19% on the
-// 2-core development machine, 2026-12-03)
+// CUDA too: off until it is timed there (the CPU backends take it: serial +14 to +20% on the
+// 2-core development machine, 2026-12-03, docs/benchmarks.md)
 constexpr bool kFixedTermsOnDevice = false;
 
 constexpr int kAllPairsTile = 128;
