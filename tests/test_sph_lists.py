@@ -263,29 +263,57 @@ def _runtime_terms(mp, kind):
     mp.setattr(k, "build", runtime_build)
 
 
-@pytest.mark.parametrize("backend", ["serial", "cpu"])
-@pytest.mark.parametrize("kind", list(KINDS))
-@pytest.mark.parametrize("lanes", (1, 4))
-def test_fixed_default_terms_are_the_runtime_terms_bit_for_bit(kind, lanes, backend, monkeypatch):
-    # the default model (Wendland C2, artificial viscosity, Fourtakas) runs the CPU's pair pass
-    # with its terms fixed at compile time; with fixed_terms = 0 it dispatches them per pair: the
-    # same functions, so the same sums and the same run
+def _fixed_and_runtime(kind, monkeypatch, backend, neighbors, **over):
+    """The same stirred state with the pair terms fixed (the default) and dispatched per pair
+    (fixed_terms = 0): each run's evaluated sums, then its state after 30 steps."""
     runs = {}
     for fixed in (1, 0):
         with monkeypatch.context() as mp:
             if not fixed:
                 _runtime_terms(mp, kind)
-            sim = stirred_by_id(small(kind, backend=backend, neighbors="lists", sph__lanes=lanes))
+            sim = stirred_by_id(small(kind, backend=backend, neighbors=neighbors, **over))
             assert sim.core.scalars()["fixed_terms"] == fixed
             sim.evaluate()
             out = [by_id(sim, n) for n in ("acceleration", "density_rate")]
             sim.step(30)
             runs[fixed] = out + [by_id(sim, n) for n in ("position", "velocity", "density")]
-    for name, a, b in zip(("acceleration", "density_rate", "position", "velocity", "density"), runs[1], runs[0]):
-        np.testing.assert_array_equal(a, b, err_msg=name)
+            spacing = sim.info["spacing"]
     assert np.abs(runs[1][1]).max() > 0  # (the diffusion and the pair terms did something)
+    return zip(("acceleration", "density_rate", "position", "velocity", "density"), runs[1], runs[0]), spacing
 
 
-def test_other_models_dispatch_their_terms():
+@pytest.mark.parametrize("backend", ["serial", "cpu"])
+@pytest.mark.parametrize("kind", list(KINDS))
+@pytest.mark.parametrize("neighbors,lanes", [("lists", 1), ("lists", 4), ("grid", 0), ("compact", 0), ("allpairs", 0)])
+def test_fixed_default_terms_are_the_runtime_terms_bit_for_bit(kind, neighbors, lanes, backend, monkeypatch):
+    # the default model (Wendland C2, artificial viscosity, Fourtakas) runs every index's pair
+    # pass with its terms fixed at compile time; with fixed_terms = 0 it dispatches them per
+    # pair: the same functions, so on the CPU the same sums and the same run
+    over = {"sph__lanes": lanes} if neighbors == "lists" else {}
+    pairs, _ = _fixed_and_runtime(kind, monkeypatch, backend, neighbors, **over)
+    for name, a, b in pairs:
+        np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("kind", list(KINDS))
+@pytest.mark.parametrize("neighbors,lanes", [("lists", 1), ("lists", 4), ("grid", 0), ("compact", 0), ("allpairs", 0)])
+def test_cuda_fixed_default_terms_are_the_runtime_terms(kind, neighbors, lanes, monkeypatch):
+    # on CUDA the compiler contracts the fixed pass's multiplies and adds into FMAs where the
+    # dispatch (a switch between them) keeps them apart: the same sums up to float32 rounding
+    if not Simulation.cuda_available():
+        pytest.skip("no CUDA")
+    over = {"sph__lanes": lanes} if neighbors == "lists" else {}
+    pairs, dp = _fixed_and_runtime(kind, monkeypatch, "cuda", neighbors, **over)
+    for name, a, b in pairs:
+        if name == "position":
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-4 * dp, err_msg=name)
+        else:
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-5 * np.abs(b).max(), err_msg=name)
+
+
+@pytest.mark.parametrize("neighbors", ["lists", "grid"])
+def test_other_models_dispatch_their_terms(neighbors):
+    assert small("dam-break-2d", neighbors=neighbors).core.scalars()["fixed_terms"] == 1
     for over in ({"sph__kernel": "cubic-spline"}, {"sph__viscosity": "laminar"}, {"sph__diffusion": "molteni"}):
-        assert small("dam-break-2d", neighbors="lists", **over).core.scalars()["fixed_terms"] == 0, over
+        assert small("dam-break-2d", neighbors=neighbors, **over).core.scalars()["fixed_terms"] == 0, over

@@ -68,10 +68,10 @@ struct Model {
   // the `lists` pair pass: lanes sharing a particle's list (1, 2, 4 or 8; CUDA threads, the CPU
   // runs them in turn); 0 in the parameters: chosen by the pipeline (auto_list_lanes)
   int lanes;
-  // the `lists` pair pass's terms fixed at compile time when the model is the default one
-  // (Wendland C2, artificial viscosity, Fourtakas diffusion: InteractStage<D, DefaultTerms>; the
-  // CPU backends); 0: always dispatched at run time (the same functions: the same sums, which a
-  // test checks)
+  // the pair pass's terms fixed at compile time when the model is the default one (Wendland
+  // C2, artificial viscosity, Fourtakas diffusion: InteractStage<D, DefaultTerms>, every index
+  // and backend); 0: always dispatched at run time (the same functions: on the CPU the same
+  // sums bit for bit, on CUDA up to the compiler's contractions, which tests check)
   int fixed_terms;
   int n_probes;
   float probes[kMaxProbes * D];

@@ -96,11 +96,6 @@ inline int auto_list_lanes(int n_fluid) {
 // candidates; the CPU runs one lane)
 constexpr int kListFillLanes = 8;
 
-// the `lists` pair pass with the default model's terms fixed at compile time (DefaultTerms) on
-// CUDA too: off until it is timed there (the CPU backends take it: serial +14 to +20% on the
-// 2-core development machine, 2026-12-03, docs/benchmarks.md)
-constexpr bool kFixedTermsOnDevice = false;
-
 constexpr int kAllPairsTile = 128;
 constexpr int kChunk = 32;
 
@@ -270,30 +265,11 @@ class Pipeline {
                     kBadNeighbors, &g->rebuild);
     }
     ex_.mark(0);
-    // 2. the pair sums through the index
-    InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
-    if constexpr (kLists) {
-      // (the walk reads the records' positions: the first member, a record apart)
-      constexpr int stride = int(sizeof(PairRecord<D>) / sizeof(VecA<D>));
-      const SlotListView<D> lv = lists_.view(reinterpret_cast<const VecA<D>*>(s.rec), m_.h, stride);
-      // the default model's terms fixed at compile time (DefaultTerms: no per-pair dispatch)
-      bool fixed = false;
-      if constexpr (!Exec::on_device || kFixedTermsOnDevice) {
-        fixed = fixed_terms();
-        if (fixed) list_pass_lanes(lv, InteractStage<D, DefaultTerms>{st.m, st.ctl, st.a, st.nf});
-      }
-      if (!fixed) list_pass_lanes(lv, st);
-    } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
-      AllPairsView<D> av{s.pos, n_, m_.h * m_.h};
-      if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
-      else gather_stage(ex_, av, st);
-    } else if constexpr (std::is_same_v<Index, CompactIndex>) {
-      gather_stage_compact(ex_, compact_.view(gv, kTagWall), st);
-    } else {
-      ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, 0});
-      if (n_ > nf_)
-        ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, GridGatherFn<D, InteractStage<D>>{gv, st, nf_, nf_});
-    }
+    // 2. the pair sums through the index (the default model's terms fixed at compile time,
+    //    DefaultTerms: no per-pair dispatch; any other model dispatches them per pair)
+    const InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
+    if (fixed_terms()) pair_pass(s, gv, InteractStage<D, DefaultTerms>{st.m, st.ctl, st.a, st.nf});
+    else pair_pass(s, gv, st);
     ex_.mark(1);
     // 3. the probes of this state (the grid's walk; all pairs for that index)
     if (m_.n_probes > 0) {
@@ -376,15 +352,33 @@ class Pipeline {
       out.push_back({"list_capacity", double(m_.max_neighbors)});
       out.push_back({"list_radius", double(m_.list_radius)});
       out.push_back({"lanes", double(m_.lanes)});  // lanes per particle in the pair pass
-      // 1: the pair pass's terms fixed at compile time (the default model's, DefaultTerms)
-      out.push_back({"fixed_terms", fixed_terms() ? 1.0 : 0.0});
     }
+    // 1: the pair pass's terms fixed at compile time (the default model's, DefaultTerms)
+    out.push_back({"fixed_terms", fixed_terms() ? 1.0 : 0.0});
     return out;
   }
 
  private:
   bool fixed_terms() const {
-    return (!Exec::on_device || kFixedTermsOnDevice) && m_.fixed_terms && DefaultTerms::matches(m_);
+    return m_.fixed_terms && DefaultTerms::matches(m_);
+  }
+  // the pair stage through the index
+  template <class Stage>
+  void pair_pass(const Arrays<D>& s, const CellGridView<D>& gv, const Stage& st) {
+    if constexpr (kLists) {
+      // (the walk reads the records' positions: the first member, a record apart)
+      constexpr int stride = int(sizeof(PairRecord<D>) / sizeof(VecA<D>));
+      list_pass_lanes(lists_.view(reinterpret_cast<const VecA<D>*>(s.rec), m_.h, stride), st);
+    } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
+      AllPairsView<D> av{s.pos, n_, m_.h * m_.h};
+      if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
+      else gather_stage(ex_, av, st);
+    } else if constexpr (std::is_same_v<Index, CompactIndex>) {
+      gather_stage_compact(ex_, compact_.view(gv, kTagWall), st);
+    } else {
+      ex_.template for_each_bounded<kPairBlocksPerSM>(nf_, GridGatherFn<D, Stage>{gv, st, nf_, 0});
+      if (n_ > nf_) ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, GridGatherFn<D, Stage>{gv, st, nf_, nf_});
+    }
   }
   template <class Stage>
   void list_pass_lanes(const SlotListView<D>& lv, const Stage& st) {
