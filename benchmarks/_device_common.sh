@@ -23,7 +23,7 @@ build_trees() {
   say built
 }
 run() { local t=$1; shift; if [ "$t" = "$SELF" ]; then timeout 90 corpuscle "$@"; else PYTHONPATH=/tmp/t_$t timeout 90 python3 -m corpuscle.cli "$@"; fi; }
-full() { tee -a "$OUT/bench_full.log" | grep -E "^(lists|grid)" | sed "s/^/$1 /" | tee -a "$log"; }
+full() { tee -a "$OUT/bench_full.log" | grep -E "^(lists|grid)|relisting" | sed "s/^/$1 /" | tee -a "$log"; }
 bench_on() {
   local label=$1 trees=$2 t; shift 2
   for t in $trees; do echo "## $t" >> "$OUT/bench_full.log"; run $t bench "$@" --backend cuda --no-progress | full "$t $label"; done

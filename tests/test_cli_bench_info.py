@@ -183,3 +183,39 @@ def test_bench_sweep_bad_options_refused_before_running(bad, words):
     proc = subprocess.run(corpuscle_command() + SWEEP + bad, capture_output=True, text=True, timeout=60)
     assert_one_line_error(proc, words)
     assert time.perf_counter() - t0 < 30
+
+
+def test_bench_start_time_times_the_flow_there_and_counts_the_relistings(tmp_path):
+    # --start-time runs the scene to that time untimed: the timed steps start there (a dam break
+    # already moving relists the lists far more often than the still column at t = 0)
+    rows = {}
+    for t in ("0", "0.1"):
+        out = tmp_path / f"rows{t}.json"
+        args = ["bench", "dam-break-2d", "--backend", "serial", "--neighbors", "lists", "--steps", "20",
+                "--repeats", "2", "--warmup", "0", "--start-time", t, "--no-progress", "--json", str(out)]
+        assert main(args) == 0
+        rows[t] = json.loads(out.read_text())[0]
+    still, moving = rows["0"], rows["0.1"]
+    assert still["start_time"] == 0.0 and moving["start_time"] == 0.1
+    # the steps to t = 0.1 were taken before the timing (there are more than a thousand)
+    assert moving["steps_taken"] > still["steps_taken"] + 1000
+    assert 0 <= still["timed_rebuilds"] < moving["timed_rebuilds"] <= 40
+
+
+@pytest.mark.parametrize("bad", [["--start-time", "-1"], ["--start-time", "later"], ["--start-time", "inf"]])
+def test_bench_start_time_bad_values_refused(bad):
+    from cli_script import assert_one_line_error
+
+    proc = subprocess.run(corpuscle_command() + BENCH + bad, capture_output=True, text=True, timeout=60)
+    assert_one_line_error(proc, "--start-time")
+
+
+def test_run_summary_counts_the_relistings(tmp_path):
+    out = tmp_path / "r.cps"
+    proc = subprocess.run(corpuscle_command() + ["run", "dam-break-2d", "--backend", "serial", "--time", "0.05",
+                                                 "--no-progress", "--out", str(out), "--json"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout.strip().splitlines()[-1])
+    # the default index is lists; a run from the still column relists at its first step at least
+    assert 1 <= s["relistings"] < s["steps"]

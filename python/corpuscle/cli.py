@@ -787,6 +787,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                         neighbors=args.neighbors, device=args.device)
     sim.set_end_time(plan.end_time)  # the core shortens the last step to land on it
     start_steps = int(sim.steps)
+    start_relists = _relistings(sim)
     init_seconds = time.perf_counter() - t_init
     backend = str(getattr(sim, "backend", args.backend))
     header = _run_header(plan, sim, backend, args)
@@ -916,6 +917,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     }
     if plan.resume is not None:
         summary["resumed_at_step"] = plan.resume["step"]
+    if start_relists is not None:
+        summary["relistings"] = _relistings(sim) - start_relists
     if args.json:
         print(json.dumps(summary, default=_json_default))
     else:
@@ -955,6 +958,14 @@ def _json_default(obj: Any) -> Any:
     return str(obj)
 
 
+def _relistings(sim) -> int | None:
+    """The `lists` index's relistings so far (None for any other index or scene)."""
+    if getattr(sim, "neighbors", None) != "lists" or not hasattr(sim, "state"):
+        return None
+    state = sim.state()
+    return int(state["rebuilds"]) if "rebuilds" in state else None
+
+
 def _print_run_summary(s: dict[str, Any], scene) -> None:
     """The human-readable run summary."""
     where = f" ({scene.path})" if scene.path and not scene.builtin else ""
@@ -974,6 +985,11 @@ def _print_run_summary(s: dict[str, Any], scene) -> None:
         ("wall time", f"{s['wall_time']:.3f} s"),
         ("steps/s", _fmt_rate(s["steps_per_second"])),
         ("particle-steps/s", _fmt_rate(s["particle_steps_per_second"])),
+    ]
+    if s.get("relistings") is not None:
+        share = f" ({100.0 * s['relistings'] / s['steps']:.0f}% of the steps)" if s["steps"] else ""
+        rows.append(("relistings", f"{s['relistings']:,}{share}"))
+    rows += [
         ("output", f"{s['out']} ({s['frames']} frames)"),
     ]
     width = max(len(k) for k, _ in rows)
@@ -1050,6 +1066,10 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", metavar="S", default="100", help="steps per timed repeat (default: 100)")
     p.add_argument("--repeats", metavar="R", default="5", help="timed repeats; the median is reported (default: 5)")
     p.add_argument("--warmup", metavar="W", default="20", help="untimed warm-up steps (default: 20)")
+    p.add_argument("--start-time", metavar="SECONDS", default="0",
+                   help="run each scene to this simulated time before the warm-up, untimed (default: 0, the "
+                        "scene's start): times the flow there, e.g. a dam break's surge, where a lists index "
+                        "relists every few steps rather than at the still start")
     p.add_argument("--batch", nargs="+", metavar="B",
                    help="time batches of B independent scenes stepped together (magic8ball; several values: a sweep); "
                         "reports scene-steps/s and particle-steps/s")
@@ -1069,6 +1089,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     steps = _int_option("--steps", args.steps, minimum=1)
     repeats = _int_option("--repeats", args.repeats, minimum=1)
     warmup = _int_option("--warmup", args.warmup, minimum=0)
+    try:
+        start_time = float(args.start_time)
+    except ValueError:
+        start_time = float("nan")
+    if not (start_time >= 0.0 and math.isfinite(start_time)):
+        raise UsageError(f"--start-time must be a simulated time of 0 s or more, got {args.start_time!r}")
     args.device = _int_option("--device", args.device, minimum=0)
     sizes = [None]
     if args.particles:
@@ -1087,6 +1113,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     batches = [_int_option("--batch", b, minimum=1) for b in args.batch] if args.batch else [None]
     if args.batch and scene.kind != "magic8ball":
         raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
+    if args.batch and start_time > 0.0:
+        raise UsageError(f"--start-time {args.start_time}: not with --batch (each scene of a batch keeps its own clock)")
     max_step = None
     if args.max_step is not None:
         try:
@@ -1152,13 +1180,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                     sim = Batch.from_scene(scene, n=batch, backend=backend, neighbors=index, device=args.device,
                                            settle=0.0)
             init_seconds = time.perf_counter() - t_init
+            if start_time > 0.0:
+                _bench_advance(sim, start_time, backend)
             if warmup:
                 sim.step(warmup)
+            relists = _relistings(sim)
             times = []
             for _ in range(repeats):
                 times.append(float(sim.bench_steps(steps)))
                 if bar is not None:
                     bar.update(1)
+            if relists is not None:
+                relists = _relistings(sim) - relists
             median = statistics.median(times)
             if size is not None:
                 last[config] = (size, median / steps)
@@ -1173,6 +1206,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "steps": steps,
                 "repeats": repeats,
                 "warmup": warmup,
+                "start_time": start_time,
                 "init_seconds": init_seconds,
                 "steps_per_second": sps,
                 "particle_steps_per_second": sps * n,
@@ -1187,9 +1221,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             if "mean_neighbors" in state:
                 row["mean_neighbors"] = float(state["mean_neighbors"])
             if "rebuilds" in state and getattr(sim, "neighbors", None) == "lists":
-                # the relistings of the lists index over every step taken (warm-up included)
+                # the relistings of the lists index over every step taken (warm-up included),
+                # and over the timed steps alone
                 row["rebuilds"] = int(state["rebuilds"])
                 row["steps_taken"] = int(state["step"])
+                row["timed_rebuilds"] = relists
             if batch is None and "n_wall" in (getattr(sim, "info", None) or {}):
                 row["wall_particles"] = int(sim.info["n_wall"])
             if (backend == "cuda" or args.stages) and batch is None:
@@ -1223,6 +1259,17 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             raise UsageError(f"cannot write {args.plot}: {exc.strerror or _one_line(exc)}") from None
         print(f"plot: {args.plot}")
     return EXIT_OK
+
+
+def _bench_advance(sim, until: float, backend: str) -> None:
+    """`bench --start-time`: the scene run to simulated time `until` (untimed); an unsound run
+    stops the benchmark with the step it went bad at."""
+    sim.run(until=until, chunk=500)
+    bad = sim.check_health()
+    if bad:
+        raise UsageError(f"--start-time {until:g}: the {backend} run went {bad}")
+    if sim.time < until:
+        raise UsageError(f"--start-time {until:g}: the {backend} run stopped at t = {sim.time:g} s")
 
 
 def _print_bench(rows: list[dict[str, Any]]) -> None:
@@ -1264,6 +1311,10 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
             continue
         total = sum(stages.values())
         what = f"{r['backend']}, {r['particles']:,} particles" + (f", {r['neighbors']}" if r.get("neighbors") else "")
+        if r.get("start_time"):
+            what += f", from t = {r['start_time']:g} s"
+        if r.get("timed_rebuilds") is not None:
+            what += f", relisting {100.0 * r['timed_rebuilds'] / (r['steps'] * r['repeats']):.0f}% of the timed steps"
         print(f"\n{what} stages (ms per step, {r['device']})")
         width = max(len(k) for k in stages)
         for name, ms in stages.items():
