@@ -426,6 +426,19 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
       nb::arg("tags") = nb::none(), nb::arg("ntags") = 1);
+  m.def(
+      "grid_walked",
+      [](const std::string& backend, const Array& pos, float radius, std::vector<float> lo, std::vector<float> hi,
+         std::optional<float> query_radius) {
+        // (cells of the list radius, queried within the radius: as a `lists` build's view)
+        IndexQuery q = query("grid", pos, query_radius ? *query_radius : radius, lo, hi, std::nullopt, 1, "all", {0, 1},
+                             radius);
+        return np(spatial_ops(backend)->grid_walked(q));
+      },
+      nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
+      nb::arg("query_radius") = nb::none(),
+      "the candidates each particle's cell walk reads (the slots of the cells it visits) in a grid of cells of "
+      "`radius`, queried within `query_radius` (default: the radius)");
   // ---- polygon signed distance and DEM contacts ----
   m.def(
       "polygon_sdf",

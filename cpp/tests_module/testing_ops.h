@@ -93,6 +93,8 @@ struct SpatialOps {
   virtual std::vector<Lists> csr_rebuilds(const IndexQuery& q, const std::vector<std::vector<float>>& positions) = 0;
   // the cell grid's sorted keys and order (sorted slot -> input slot)
   virtual void grid_sort(const IndexQuery& q, std::vector<uint64_t>& keys, std::vector<int>& order) = 0;
+  // the candidates each input particle's cell walk reads (the slots of the cell ranges it visits)
+  virtual std::vector<int> grid_walked(const IndexQuery& q) = 0;
 };
 
 // ---------------------------------------------------------------------------------------
@@ -205,6 +207,18 @@ struct FillStage {
   CPS_HD Acc begin(int i) const { return offsets[i]; }
   CPS_HD void visit(Acc& a, int, int j, const Vec<D>&, float) const { nbr[a++] = j; }
   CPS_HD void end(int, Acc&) const {}
+};
+
+// the candidates of slot i's cell walk: the slots of the cell ranges it visits
+template <int D>
+struct WalkedFn {
+  CellGridView<D> view;
+  int* out;
+  CPS_HD void operator()(int i) const {
+    int c = 0;
+    if (view.active(i)) view.for_each_cell_range(i, view.position(i), [&](uint32_t s, uint32_t e) { c += int(e - s); });
+    out[i] = c;
+  }
 };
 
 // every pair pairs() visits, claimed with an atomic counter (cap 0: count only)
@@ -461,6 +475,11 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
     if (q.dim == 3) return grid_sort_d<3>(q, keys, order);
     throw Error("dim must be 2 or 3");
   }
+  std::vector<int> grid_walked(const IndexQuery& q) override {
+    if (q.dim == 2) return grid_walked_d<2>(q);
+    if (q.dim == 3) return grid_walked_d<3>(q);
+    throw Error("dim must be 2 or 3");
+  }
 
  private:
   template <int D>
@@ -687,6 +706,22 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
     grid.sort(ex, pos.data(), q.tags.empty() ? nullptr : tags.data(), n);
     keys = grid.sorted_keys_host(ex);
     order = this->download(grid.order(), size_t(n));
+  }
+  template <int D>
+  std::vector<int> grid_walked_d(const IndexQuery& q) {
+    const int n = q.n;
+    auto pos = this->template alloc<Vec<D>>(size_t(n));
+    if (n) ex.to_device(pos.data(), q.pos.data(), size_t(n) * sizeof(Vec<D>));
+    auto tags = this->upload(q.tags);
+    CellGrid<D, Exec> grid(spec_of<D>(q, q.list_radius));
+    grid.build(ex, pos.data(), q.tags.empty() ? nullptr : tags.data(), n);
+    auto walked = this->template alloc<int>(size_t(n));
+    ex.for_each(n, WalkedFn<D>{tagged<D>(q, grid.view()).with_radius(q.radius), walked.data()});
+    std::vector<int> sorted = this->download(walked.data(), size_t(n));
+    const std::vector<int> order = this->download(grid.order(), size_t(n));
+    std::vector<int> out(static_cast<size_t>(n));
+    for (int s = 0; s < n; ++s) out[order[s]] = sorted[s];
+    return out;
   }
 };
 

@@ -251,8 +251,49 @@ struct CellGridView {
     });
   }
 
-  // the cell ranges [s, e) of sorted slots around xi's cell, in for_each_block_slot's order,
-  // for tags [tag_begin, tag_end) (own_tag: slot i's tag); f(s, e) for each
+  // for_each_block_slot's cells less those that lie wholly beyond the query radius of xi: a
+  // cell is left out when the distance from xi to its box (the gaps to the faces between them,
+  // in double) exceeds sqrt(r2) by a margin (1e-5 of r2, far above the float rounding of the
+  // distance check), so no slot it holds could pass that check; the walks visit the same
+  // neighbours in the same order. (Cells of the radius: a 3-D walk reads about 20.6 of the 27
+  // cells on average, 2-D 8.1 of 9.) A border cell also holds the positions beyond the domain
+  // clamped into it, all on its far side from the face the gap is measured to; NaN culls nothing.
+  template <class F>
+  CPS_HD void for_each_near_slot(const Vec<D>& xi, int t0, int t1, F&& f) const {
+    int c[D];
+    spec.cell_of(xi, c);
+    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, at[3] = {0, 0, 0};
+    float g2[3][3] = {{0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}};  // [axis][offset + 1]
+    for (int k = 0; k < D; ++k) {
+      lo[k] = c[k] > 0 ? c[k] - 1 : 0;
+      hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
+      at[k] = c[k];
+      const double face = double(spec.origin[k]) + double(c[k]) * double(spec.cell);
+      const double below = double(xi[k]) - face, above = face + double(spec.cell) - double(xi[k]);
+      g2[k][0] = below > 0.0 ? float(below * below) : 0.0f;
+      g2[k][2] = above > 0.0 ? float(above * above) : 0.0f;
+    }
+    const float lim = r2 * (1.0f + 1e-5f);
+    const uint64_t dx = uint64_t(spec.dims[0]);
+    const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
+    for (int t = t0; t < t1; ++t) {
+      const uint64_t tbase = uint64_t(t) * spec.ncells;
+      for (int z = lo[2]; z <= hi[2]; ++z) {
+        const float gz = g2[2][z - at[2] + 1];
+        for (int y = lo[1]; y <= hi[1]; ++y) {
+          const float gzy = gz + g2[1][y - at[1] + 1];
+          if (gzy > lim) continue;
+          const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
+          for (int x = lo[0]; x <= hi[0]; ++x)
+            if (!(gzy + g2[0][x - at[0] + 1] > lim)) f(row + uint64_t(x), t);
+        }
+      }
+    }
+  }
+
+  // the cell ranges [s, e) of sorted slots around xi's cell that may hold a slot within the
+  // query radius (for_each_near_slot's, in for_each_block_slot's order), for tags [tag_begin,
+  // tag_end) (own_tag: slot i's tag); f(s, e) for each
   template <class F>
   CPS_HD void for_each_cell_range(int i, const Vec<D>& xi, F&& f) const {
     int t0 = tag_begin, t1 = tag_end;
@@ -260,7 +301,7 @@ struct CellGridView {
       t0 = spec.tag_of_key(key(i));
       t1 = t0 + 1;
     }
-    for_each_block_slot(xi, t0, t1, [&](uint64_t slot, int) { f(cell_start[slot], cell_end[slot]); });
+    for_each_near_slot(xi, t0, t1, [&](uint64_t slot, int) { f(cell_start[slot], cell_end[slot]); });
   }
 
   // the cells' slots in for_each_cell_range's order, each cell's in sorted order
