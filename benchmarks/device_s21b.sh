@@ -1,23 +1,25 @@
 #!/usr/bin/env bash
-# s21b: main with the default model's terms fixed at compile time in every index's pair pass,
-# CUDA included (the lists pass's +10% of s21a), against ./tmp_b (a05c2ff: the dispatch on CUDA)
-# and ./tmp_b12 (main with the lists pass at 12 blocks a multiprocessor); every gpu test of main;
-# then the dam break in motion (bench --start-time 0.15, where the lists relist every few steps)
-# across skins; whole runs of dam-break-dsph as DualSPHysics times its own (to its end time);
-# Nsight Compute on the fixed pair pass and the build. Trees:
+# s21b: main (the default model's terms fixed in every index's pair pass, CUDA included; the
+# cell walks leaving out the cells beyond reach) against ./tmp_h (ce24ac0: the fixed terms
+# alone) and ./tmp_b (a05c2ff: the dispatch on CUDA); every gpu test of main; the dam break in
+# motion (bench --start-time 0.15, where the lists relist every few steps) across skins; whole
+# runs of dam-break-dsph as DualSPHysics times its own (to its end time); Nsight Compute on the
+# pair pass and the build. Trees:
 #   mkdir tmp_b; git archive a05c2ff | tar -x -C tmp_b
-#   mkdir tmp_b12; (main's files); sed -i "s/kListPairBlocksPerSM = 10;/kListPairBlocksPerSM = 12;/" tmp_b12/cpp/include/corpuscle/scenes/sph/pipeline.h
+#   mkdir tmp_h; git archive ce24ac0 | tar -x -C tmp_h
 NAME=s21b SELF=m
 source benchmarks/_device_common.sh
-build_trees "b b12"
+build_trees "b h"
 gpu_tests main 240 tests
-bench_on 131072 "b m b12" "${BOX129[@]}"
-bench_on dsph "b m b12" "${DSPH[@]}"
-bench_on 1M "m b12" "${BOX1M[@]}"
-bench_on "131072 grid" "b m" "${BOX129[@]}" --neighbors grid
-bench_on "dsph grid" "b m" "${DSPH[@]}" --neighbors grid
+bench_on 131072 "b h m" "${BOX129[@]}"
+bench_on dsph "b h m" "${DSPH[@]}"
+bench_on 1M "h m" "${BOX1M[@]}"
+bench_on "131072 grid" "b h m" "${BOX129[@]}" --neighbors grid
+bench_on "dsph grid" "h m" "${DSPH[@]}" --neighbors grid
+for t in h m; do echo "## $t wind" >> "$OUT/bench_full.log"; run $t bench wind-tunnel --backend cuda --steps 200 --repeats 3 --no-progress | tee -a "$OUT/bench_full.log" | grep -E "^(grid|cuda)" | sed "s/^/$t wind /" | tee -a "$log"; done
 say the flow at t = 0.15 s
-for s in 0.04 0.06 0.08 0.12; do bench_on "dsph t0.15 skin $s" m "${DSPH[@]}" --start-time 0.15 --set sph.skin=$s; done
+bench_on "dsph t0.15" "h m" "${DSPH[@]}" --start-time 0.15
+for s in 0.06 0.08 0.12; do bench_on "dsph t0.15 skin $s" m "${DSPH[@]}" --start-time 0.15 --set sph.skin=$s; done
 bench_on "131072 t0.15" m "${BOX129[@]}" --start-time 0.15
 say whole runs
 for p in 1040000 171496; do
