@@ -73,7 +73,7 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
         "sph.skin": _K("float", 0.04, "h", 0.0, 1.0,
                        "--neighbors lists: the lists reach h (1 + skin), h the kernel support, and are reused "
                        "until a particle has moved skin h / 2; 0 relists every step (0.04: the fastest on the "
-                       "H200, docs/benchmarks.md)"),
+                       "H200 in the first steps; 0.12 in a running dam break, docs/benchmarks.md)"),
         "sph.lanes": _K("int", 0, "", 0, 8,
                         "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
                         "(their partial sums merged in a fixed order); 0: chosen by the state's size (on CUDA the "
