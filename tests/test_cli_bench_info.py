@@ -200,6 +200,11 @@ def test_bench_start_time_times_the_flow_there_and_counts_the_relistings(tmp_pat
     # the steps to t = 0.1 were taken before the timing (there are more than a thousand)
     assert moving["steps_taken"] > still["steps_taken"] + 1000
     assert 0 <= still["timed_rebuilds"] < moving["timed_rebuilds"] <= 40
+    # the warm-up steps are taken after the run to the start time (not no-ops at its end)
+    out = tmp_path / "warm.json"
+    assert main(["bench", "dam-break-2d", "--backend", "serial", "--neighbors", "lists", "--steps", "20",
+                 "--repeats", "2", "--warmup", "30", "--start-time", "0.1", "--no-progress", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())[0]["steps_taken"] == moving["steps_taken"] + 30
 
 
 @pytest.mark.parametrize("bad", [["--start-time", "-1"], ["--start-time", "later"], ["--start-time", "inf"]])

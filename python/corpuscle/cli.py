@@ -1270,6 +1270,7 @@ def _bench_advance(sim, until: float, backend: str) -> None:
         raise UsageError(f"--start-time {until:g}: the {backend} run went {bad}")
     if sim.time < until:
         raise UsageError(f"--start-time {until:g}: the {backend} run stopped at t = {sim.time:g} s")
+    sim.set_end_time(math.inf)  # (run() ended the clock at `until`: the warm-up steps would be no-ops)
 
 
 def _print_bench(rows: list[dict[str, Any]]) -> None:
