@@ -1089,11 +1089,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     steps = _int_option("--steps", args.steps, minimum=1)
     repeats = _int_option("--repeats", args.repeats, minimum=1)
     warmup = _int_option("--warmup", args.warmup, minimum=0)
-    try:
-        start_time = float(args.start_time)
-    except ValueError:
-        start_time = float("nan")
-    if not (start_time >= 0.0 and math.isfinite(start_time)):
+    start_time = _float_option("--start-time", args.start_time)
+    if start_time < 0.0:
         raise UsageError(f"--start-time must be a simulated time of 0 s or more, got {args.start_time!r}")
     args.device = _int_option("--device", args.device, minimum=0)
     sizes = [None]
@@ -1115,14 +1112,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
     if args.batch and start_time > 0.0:
         raise UsageError(f"--start-time {args.start_time}: not with --batch (each scene of a batch keeps its own clock)")
-    max_step = None
-    if args.max_step is not None:
-        try:
-            max_step = float(args.max_step)
-        except ValueError:
-            max_step = float("nan")
-        if not (max_step > 0.0 and math.isfinite(max_step)):
-            raise UsageError(f"--max-step must be a positive number of seconds, got {args.max_step!r}")
+    max_step = _float_option("--max-step", args.max_step)
+    if max_step is not None and not max_step > 0.0:
+        raise UsageError(f"--max-step must be a positive number of seconds, got {args.max_step!r}")
     if args.plot is not None:
         from ._viz_common import check_file_output
 
