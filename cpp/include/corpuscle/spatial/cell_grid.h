@@ -219,24 +219,7 @@ struct CellGridView {
   // narrower than three cells visits no cell twice); f(slot, tag) for each
   template <class F>
   CPS_HD void for_each_block_slot(const Vec<D>& xi, int t0, int t1, F&& f) const {
-    int c[D];
-    spec.cell_of(xi, c);
-    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-    for (int k = 0; k < D; ++k) {
-      lo[k] = c[k] > 0 ? c[k] - 1 : 0;
-      hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
-    }
-    const uint64_t dx = uint64_t(spec.dims[0]);
-    const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
-    for (int t = t0; t < t1; ++t) {
-      const uint64_t tbase = uint64_t(t) * spec.ncells;
-      for (int z = lo[2]; z <= hi[2]; ++z) {
-        for (int y = lo[1]; y <= hi[1]; ++y) {
-          const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
-          for (int x = lo[0]; x <= hi[0]; ++x) f(row + uint64_t(x), t);
-        }
-      }
-    }
+    block_slots<false>(xi, t0, t1, f);
   }
 
   // the slots in the 3^D cells around xi's cell (in the grid) of tags [tag_begin, tag_end),
@@ -260,6 +243,12 @@ struct CellGridView {
   // clamped into it, all on its far side from the face the gap is measured to; NaN culls nothing.
   template <class F>
   CPS_HD void for_each_near_slot(const Vec<D>& xi, int t0, int t1, F&& f) const {
+    block_slots<true>(xi, t0, t1, f);
+  }
+
+  // the 3^D block's slots in for_each_block_slot's order, less (kCull) those beyond reach
+  template <bool kCull, class F>
+  CPS_HD void block_slots(const Vec<D>& xi, int t0, int t1, F& f) const {
     int c[D];
     spec.cell_of(xi, c);
     int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, at[3] = {0, 0, 0};
@@ -268,10 +257,12 @@ struct CellGridView {
       lo[k] = c[k] > 0 ? c[k] - 1 : 0;
       hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
       at[k] = c[k];
-      const double face = double(spec.origin[k]) + double(c[k]) * double(spec.cell);
-      const double below = double(xi[k]) - face, above = face + double(spec.cell) - double(xi[k]);
-      g2[k][0] = below > 0.0 ? float(below * below) : 0.0f;
-      g2[k][2] = above > 0.0 ? float(above * above) : 0.0f;
+      if constexpr (kCull) {
+        const double face = double(spec.origin[k]) + double(c[k]) * double(spec.cell);
+        const double below = double(xi[k]) - face, above = face + double(spec.cell) - double(xi[k]);
+        g2[k][0] = below > 0.0 ? float(below * below) : 0.0f;
+        g2[k][2] = above > 0.0 ? float(above * above) : 0.0f;
+      }
     }
     const float lim = r2 * (1.0f + 1e-5f);
     const uint64_t dx = uint64_t(spec.dims[0]);
@@ -282,10 +273,10 @@ struct CellGridView {
         const float gz = g2[2][z - at[2] + 1];
         for (int y = lo[1]; y <= hi[1]; ++y) {
           const float gzy = gz + g2[1][y - at[1] + 1];
-          if (gzy > lim) continue;
+          if (kCull && gzy > lim) continue;
           const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
           for (int x = lo[0]; x <= hi[0]; ++x)
-            if (!(gzy + g2[0][x - at[0] + 1] > lim)) f(row + uint64_t(x), t);
+            if (!(kCull && gzy + g2[0][x - at[0] + 1] > lim)) f(row + uint64_t(x), t);
         }
       }
     }
