@@ -70,10 +70,11 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
         "sph.diffusion": _K("enum", "fourtakas", "", doc="density diffusion: none, molteni (Molteni & Colagrossi "
                             "2009) or fourtakas (Fourtakas et al. 2019, DualSPHysics's DDT2)", choices=tuple(DIFFUSIONS)),
         "sph.delta": _K("float", 0.1, "", 0.0, 1.0, "density diffusion coefficient delta"),
-        "sph.skin": _K("float", 0.04, "h", 0.0, 1.0,
+        "sph.skin": _K("float", 0.08, "h", 0.0, 1.0,
                        "--neighbors lists: the lists reach h (1 + skin), h the kernel support, and are reused "
-                       "until a particle has moved skin h / 2; 0 relists every step (0.04: the fastest on the "
-                       "H200 in the first steps; 0.12 in a running dam break, docs/benchmarks.md)"),
+                       "until a particle has moved skin h / 2; 0 relists every step (0.08: the fastest of "
+                       "0.04 to 0.2 over whole dam-break runs on the H200; a still column's first steps "
+                       "favour 0.04, docs/benchmarks.md)"),
         "sph.lanes": _K("int", 0, "", 0, 8,
                         "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
                         "(their partial sums merged in a fixed order); 0: chosen by the state's size (on CUDA the "
