@@ -215,6 +215,21 @@ def test_bench_start_time_bad_values_refused(bad):
     assert_one_line_error(proc, "--start-time")
 
 
+def test_bench_start_time_at_or_past_the_end_time_is_refused_at_once():
+    # (it would otherwise run the scene far past its end, untimed, before any output)
+    from cli_script import assert_one_line_error
+
+    t0 = time.perf_counter()
+    proc = subprocess.run(corpuscle_command() + ["bench", "dam-break-dsph", "--backend", "serial", "--start-time", "100",
+                                                 "--no-progress"], capture_output=True, text=True, timeout=60)
+    assert_one_line_error(proc, "run.end_time")
+    assert time.perf_counter() - t0 < 30
+    proc = subprocess.run(corpuscle_command() + ["bench", "dam-break-2d", "--backend", "serial", "--start-time", "0.2",
+                                                 "--set", "run.end_time=0.2", "--no-progress"],
+                          capture_output=True, text=True, timeout=60)
+    assert_one_line_error(proc, "--start-time 0.2")
+
+
 def test_run_summary_counts_the_relistings(tmp_path):
     out = tmp_path / "r.cps"
     proc = subprocess.run(corpuscle_command() + ["run", "dam-break-2d", "--backend", "serial", "--time", "0.05",

@@ -1112,6 +1112,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
     if args.batch and start_time > 0.0:
         raise UsageError(f"--start-time {args.start_time}: not with --batch (each scene of a batch keeps its own clock)")
+    end = float(scene["run.end_time"])
+    if start_time > 0.0 and start_time >= end:
+        raise UsageError(f"--start-time {args.start_time}: not before {scene.name}'s end time run.end_time = {end:g} s "
+                         f"(raise it with --set run.end_time=T to time the flow later)")
     max_step = _float_option("--max-step", args.max_step)
     if max_step is not None and not max_step > 0.0:
         raise UsageError(f"--max-step must be a positive number of seconds, got {args.max_step!r}")
@@ -1173,7 +1177,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                                            settle=0.0)
             init_seconds = time.perf_counter() - t_init
             if start_time > 0.0:
+                if bar is not None:
+                    bar.set_description(f"{backend}: running to t = {start_time:g} s")
                 _bench_advance(sim, start_time, backend)
+                if bar is not None:
+                    bar.set_description(backend)
             if warmup:
                 sim.step(warmup)
             relists = _relistings(sim)
