@@ -277,6 +277,20 @@ def test_validate_json_is_the_checks_alone():
     assert "surge front" in proc.stderr
 
 
+def test_validate_runs_the_scenes_index_by_default_and_any_other_alike():
+    # the default is the scenes' own index (lists); grid gives the same fronts to float rounding
+    fronts = {}
+    for idx in (None, "grid"):
+        args = ["validate", "dam-break", "--backend", "cpu", "--plot", "none", "--json"]
+        proc = corpuscle(*(args + (["--neighbors", idx] if idx else [])), timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        fronts[idx] = [c["measured"] for c in json.loads(proc.stdout) if c["name"].startswith("front")]
+    assert len(fronts[None]) == 13
+    np.testing.assert_allclose(fronts[None], fronts["grid"], rtol=0, atol=0.02)
+    helptext = corpuscle("validate", "hydrostatic", "--help").stdout
+    assert "default: lists" in helptext
+
+
 def test_validate_bad_input():
     assert_one_line_error(corpuscle("validate", "nonsense"), "nonsense")
     assert_one_line_error(corpuscle("validate", "hydrostatic", "--particles", "-5"), "--particles")

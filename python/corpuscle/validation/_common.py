@@ -9,8 +9,8 @@ BACKENDS = ("serial", "cpu", "cuda")
 def add_engine(parser, default_backend: str = "cpu") -> None:
     parser.add_argument("--backend", choices=BACKENDS, default=default_backend,
                         help=f"compute backend (default: {default_backend})")
-    parser.add_argument("--neighbors", choices=("grid", "compact", "allpairs"), default="grid",
-                        help="neighbour search (default: grid)")
+    parser.add_argument("--neighbors", choices=("lists", "grid", "compact", "allpairs"), default="lists",
+                        help="neighbour search (default: lists, as the scenes run)")
     parser.add_argument("--device", type=int, default=0, help="CUDA device (default: 0)")
 
 
