@@ -20,8 +20,9 @@ requires_cuda = pytest.mark.skipif(not CUDA, reason=f"no usable CUDA backend: {C
 GPU = [pytest.mark.gpu, requires_cuda]
 
 BACKENDS = ["serial", "cpu", pytest.param("cuda", marks=GPU)]
-INDEXES = ["allpairs", "allpairs_tiled", "grid", "csr_grid", "csr_allpairs"]
-GRID_INDEXES = ["grid", "csr_grid"]
+# (*_rows: the grid kinds with their cells sorted in rows, as the SPH scenes sort them)
+INDEXES = ["allpairs", "allpairs_tiled", "grid", "csr_grid", "csr_allpairs", "grid_rows", "csr_grid_rows"]
+GRID_INDEXES = ["grid", "csr_grid", "grid_rows", "csr_grid_rows"]
 
 
 # --------------------------------------------------------------------------------------
@@ -291,6 +292,50 @@ def test_grid_keys_hold_tag_above_morton_cell_and_sort_stably_with_unused_slots_
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_grid_keys_in_rows_hold_tag_above_the_linear_cell_and_need_no_more_bits_than_morton(backend, dim):
+    rng = np.random.default_rng(6)
+    n = 3000
+    hi = [1.0, 0.7, 0.4][:dim]  # unequal axes: the linear index needs fewer bits than Morton's D * bits
+    pos = (rng.uniform(-0.2, 1.2, (n, dim)) * np.array(hi)).astype(np.float32)
+    pos[:500] = pos[500:1000]
+    tags = rng.integers(-1, 3, n).astype(np.int32)
+    radius = 0.05
+    spec = T.cell_grid_spec(dim, [0.0] * dim, hi, radius, ntags=3, order="rows")
+    morton = T.cell_grid_spec(dim, [0.0] * dim, hi, radius, ntags=3)
+    assert spec["dims"] == morton["dims"] and spec["table_entries"] == morton["table_entries"]
+    assert spec["cell_bits"] == int(np.ceil(np.log2(spec["ncells"]))) == spec["tag_shift"]
+    assert spec["key_bits"] == spec["cell_bits"] + 2 < morton["key_bits"]
+    keys, order = T.grid_sort(backend, pos, radius, [0.0] * dim, hi, tags=tags, ntags=3, order="rows")
+    dims = np.array(spec["dims"])
+    cell = np.floor(pos.astype(np.float64) * (1.0 / spec["cell"]))
+    cell = np.clip(cell, 0, dims - 1).astype(np.uint64)
+    linear = cell[:, 0] + np.uint64(dims[0]) * cell[:, 1]
+    if dim == 3:
+        linear += np.uint64(dims[0] * dims[1]) * cell[:, 2]
+    ref = linear | (tags.astype(np.uint64) << np.uint64(spec["tag_shift"]))
+    ref[tags < 0] = np.uint64(spec["sentinel"])
+    np.testing.assert_array_equal(order, np.argsort(ref, kind="stable"))
+    np.testing.assert_array_equal(keys, ref[order])
+    with pytest.raises(ValueError, match="morton or rows"):
+        T.cell_grid_spec(dim, [0.0] * dim, hi, radius, order="hilbert")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("scene", ["uniform", "outside", "elongated"])
+@pytest.mark.parametrize("kind", ["grid", "csr_grid"])
+def test_cells_in_rows_give_the_morton_grid_lists_entry_for_entry(backend, dim, scene, kind):
+    # a row's three cells read as one range are the same slots in the same order as the three
+    # cells one by one, and within a cell the stable sort keeps the input order in either
+    # cell order: so in input numbering the lists are identical, entry for entry
+    a, _, _ = run_gather(backend, kind, scene, dim)
+    b, _, _ = run_gather(backend, kind + "_rows", scene, dim)
+    np.testing.assert_array_equal(a["offsets"], b["offsets"])
+    np.testing.assert_array_equal(a["neighbors"], b["neighbors"])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("width", ["narrow", "wide"])
 def test_grid_keys_sort_the_same_stored_in_32_or_64_bits(backend, width):
     # keys of at most 32 bits are sorted as 32-bit words, wider ones as 64-bit: both give the
@@ -326,7 +371,7 @@ def test_gather_finds_exactly_the_brute_force_neighbours(backend, index, dim, sc
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("index", ["allpairs", "grid", "csr_grid", "csr_allpairs"])  # tiled: gather only
+@pytest.mark.parametrize("index", ["allpairs", "grid", "csr_grid", "csr_allpairs", "grid_rows", "csr_grid_rows"])  # tiled: gather only
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("scene", ["uniform", "outside", "coincident", "radius_beyond_domain"])
 def test_pairs_visits_each_unordered_pair_exactly_once(backend, index, dim, scene):
@@ -543,6 +588,8 @@ def test_cell_walk_reads_only_the_cells_within_reach(backend, dim, query):
     got = T.grid_walked(backend, pos, r, lo, hi, query_radius=r * query)
     near, block = walked_reference(pos, r, r * query, lo, hi)
     np.testing.assert_array_equal(got, near)
+    # in rows: the same cells (each row's kept cells as one range)
+    np.testing.assert_array_equal(T.grid_walked(backend, pos, r, lo, hi, query_radius=r * query, order="rows"), near)
     want, _ = brute_codes(pos, r * query)
     assert np.all(got >= np.bincount(want // len(pos), minlength=len(pos)))  # (every neighbour's cell is read)
     share = got.sum() / block.sum()

@@ -79,7 +79,8 @@ int index_kind(const std::string& s) {
   if (s == "grid") return kCellGrid;
   if (s == "csr_grid") return kCsrGrid;
   if (s == "csr_allpairs") return kCsrAllPairs;
-  throw nb::value_error(("unknown index '" + s + "' (allpairs, allpairs_tiled, grid, csr_grid, csr_allpairs)").c_str());
+  throw nb::value_error(
+      ("unknown index '" + s + "' (allpairs, allpairs_tiled, grid, csr_grid, csr_allpairs; grid_rows, csr_grid_rows)").c_str());
 }
 int reduce_op(const std::string& s) {
   if (s == "sum") return kSum;
@@ -92,7 +93,12 @@ IndexQuery query(const std::string& index, const Array& pos, float radius, std::
                  std::optional<std::vector<float>> hi, std::optional<Array> tags, int ntags, const std::string& tag_mode,
                  std::pair<int, int> tag_range, std::optional<float> list_radius) {
   IndexQuery q;
-  q.kind = index_kind(index);
+  // "<grid kind>_rows": the same index with its cells sorted in rows
+  const std::string suffix = "_rows";
+  const bool rows = index.size() > suffix.size() && index.compare(index.size() - suffix.size(), suffix.size(), suffix) == 0;
+  q.kind = index_kind(rows ? index.substr(0, index.size() - suffix.size()) : index);
+  if (rows && q.kind != kCellGrid && q.kind != kCsrGrid) throw nb::value_error("only the grid kinds take _rows");
+  q.rows = rows;
   if (pos.ndim() != 2 || (pos.shape(1) != 2 && pos.shape(1) != 3))
     throw nb::value_error("positions must have shape (n, 2) or (n, 3)");
   q.dim = int(pos.shape(1));
@@ -135,13 +141,13 @@ nb::dict lists_dict(const Lists& l) {
 
 template <int D>
 nb::dict spec_dict(const std::vector<float>& lo, const std::vector<float>& hi, float radius, int ntags,
-                   uint64_t max_cells) {
+                   uint64_t max_cells, bool rows) {
   Vec<D> l, h;
   for (int k = 0; k < D; ++k) {
     l[k] = lo.at(k);
     h[k] = hi.at(k);
   }
-  CellGridSpec<D> g = make_cell_grid<D>(l, h, radius, ntags, max_cells);
+  CellGridSpec<D> g = make_cell_grid<D>(l, h, radius, ntags, max_cells, rows ? CellOrder::Rows : CellOrder::Morton);
   nb::dict d;
   std::vector<int> dims(g.dims, g.dims + D);
   d["dims"] = dims;
@@ -151,6 +157,7 @@ nb::dict spec_dict(const std::vector<float>& lo, const std::vector<float>& hi, f
   d["radius"] = g.radius;
   d["bits"] = g.bits;
   d["tag_shift"] = g.tag_shift();
+  d["cell_bits"] = g.cell_bits;
   d["key_bits"] = g.key_bits;
   d["ntags"] = g.ntags;
   d["sentinel"] = CellGridSpec<D>::kSentinel;
@@ -370,13 +377,15 @@ NB_MODULE(_testing, m) {
   // ---- spatial indexes ----
   m.def(
       "cell_grid_spec",
-      [](int dim, std::vector<float> lo, std::vector<float> hi, float radius, int ntags, uint64_t max_cells) {
-        if (dim == 2) return spec_dict<2>(lo, hi, radius, ntags, max_cells);
-        if (dim == 3) return spec_dict<3>(lo, hi, radius, ntags, max_cells);
+      [](int dim, std::vector<float> lo, std::vector<float> hi, float radius, int ntags, uint64_t max_cells,
+         const std::string& order) {
+        if (order != "morton" && order != "rows") throw nb::value_error("order must be morton or rows");
+        if (dim == 2) return spec_dict<2>(lo, hi, radius, ntags, max_cells, order == "rows");
+        if (dim == 3) return spec_dict<3>(lo, hi, radius, ntags, max_cells, order == "rows");
         throw nb::value_error("dim must be 2 or 3");
       },
       nb::arg("dim"), nb::arg("lo"), nb::arg("hi"), nb::arg("radius"), nb::arg("ntags") = 1,
-      nb::arg("max_cells") = kCellGridMaxCells);
+      nb::arg("max_cells") = kCellGridMaxCells, nb::arg("order") = "morton");
 
   m.def(
       "gather",
@@ -417,26 +426,29 @@ NB_MODULE(_testing, m) {
   m.def(
       "grid_sort",
       [](const std::string& backend, const Array& pos, float radius, std::vector<float> lo, std::vector<float> hi,
-         std::optional<Array> tags, int ntags) {
-        IndexQuery q = query("grid", pos, radius, lo, hi, tags, ntags, "all", {0, 1}, std::nullopt);
+         std::optional<Array> tags, int ntags, const std::string& cells) {
+        if (cells != "morton" && cells != "rows") throw nb::value_error("order must be morton or rows");
+        IndexQuery q = query(cells == "rows" ? "grid_rows" : "grid", pos, radius, lo, hi, tags, ntags, "all", {0, 1},
+                             std::nullopt);
         std::vector<uint64_t> keys;
         std::vector<int> order;
         spatial_ops(backend)->grid_sort(q, keys, order);
         return nb::make_tuple(np(keys), np(order));
       },
       nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
-      nb::arg("tags") = nb::none(), nb::arg("ntags") = 1);
+      nb::arg("tags") = nb::none(), nb::arg("ntags") = 1, nb::arg("order") = "morton");
   m.def(
       "grid_walked",
       [](const std::string& backend, const Array& pos, float radius, std::vector<float> lo, std::vector<float> hi,
-         std::optional<float> query_radius) {
+         std::optional<float> query_radius, const std::string& order) {
+        if (order != "morton" && order != "rows") throw nb::value_error("order must be morton or rows");
         // (cells of the list radius, queried within the radius: as a `lists` build's view)
-        IndexQuery q = query("grid", pos, query_radius ? *query_radius : radius, lo, hi, std::nullopt, 1, "all", {0, 1},
-                             radius);
+        IndexQuery q = query(order == "rows" ? "grid_rows" : "grid", pos, query_radius ? *query_radius : radius, lo, hi,
+                             std::nullopt, 1, "all", {0, 1}, radius);
         return np(spatial_ops(backend)->grid_walked(q));
       },
       nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
-      nb::arg("query_radius") = nb::none(),
+      nb::arg("query_radius") = nb::none(), nb::arg("order") = "morton",
       "the candidates each particle's cell walk reads (the slots of the cells it visits) in a grid of cells of "
       "`radius`, queried within `query_radius` (default: the radius)");
   // ---- polygon signed distance and DEM contacts ----

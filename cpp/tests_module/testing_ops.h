@@ -73,6 +73,7 @@ struct IndexQuery {
   std::vector<int> tags;     // empty: all tag 0
   int ntags = 1;
   int tag_mode = kAllTags, tag_a = 0, tag_b = 1;
+  bool rows = false;  // grid kinds: the cells sorted in rows (CellOrder::Rows), not Morton
 };
 
 // neighbour sets in the input numbering: offsets (n + 1) and the neighbours of each input
@@ -489,7 +490,7 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
       lo[k] = q.lo.at(k);
       hi[k] = q.hi.at(k);
     }
-    return make_cell_grid<D>(lo, hi, radius, q.ntags);
+    return make_cell_grid<D>(lo, hi, radius, q.ntags, kCellGridMaxCells, q.rows ? CellOrder::Rows : CellOrder::Morton);
   }
   template <int D>
   CellGridView<D> tagged(const IndexQuery& q, CellGridView<D> v) {

@@ -1,4 +1,4 @@
-// A uniform cell grid with per-axis extents, keyed in 64-bit Morton order.
+// A uniform cell grid with per-axis extents, keyed in 64-bit Morton order or in rows.
 //
 // Cells have an edge of at least the query radius; each axis has as many cells as the
 // domain needs (a 4 x 1 x 1 m tank at 1 cm cells: 400 x 100 x 100 cells), so memory follows
@@ -6,7 +6,11 @@
 //
 //     key = (tag << (D * bits)) | morton(cell),     bits = Morton bits for the longest axis
 //
-// so every tag (a layer: fluid / ghosts, or a scene of a batch) stays contiguous and sorted
+// or, in rows (CellOrder::Rows), key = (tag << cell_bits) | linear(cell) with x fastest and
+// cell_bits the bits of the largest linear index: the three cells x - 1, x, x + 1 of a row
+// then hold consecutive sorted slots, so a walk reads a row of the 3^D block as one range (9
+// ranges in 3-D instead of 27 cells, 3 in 2-D instead of 9; the same slots in the same order).
+// Every tag (a layer: fluid / ghosts, or a scene of a batch) stays contiguous and sorted
 // by cell inside; unused slots (tag outside [0, ntags)) get kSentinel and sort last. The
 // cell table is indexed by tag * ncells + linear cell index (x fastest), not by the Morton
 // code, so it holds exactly ntags * dims[0] * ... * dims[D-1] ranges. Positions outside the
@@ -50,6 +54,9 @@ inline std::string cell_count_text(double v) {
   return buf;
 }
 
+// the order of the cells in the sort: Morton (z-order), or rows (the linear index, x fastest)
+enum class CellOrder { Morton, Rows };
+
 template <int D>
 struct CellGridSpec {
   static constexpr uint64_t kSentinel = ~uint64_t(0);
@@ -61,10 +68,12 @@ struct CellGridSpec {
   int dims[D] = {};      // cells per axis
   uint64_t ncells = 0;   // dims[0] * ... * dims[D-1]: the cells of one tag
   int bits = 0;          // Morton bits per axis
+  bool rows = false;     // CellOrder::Rows: the key's cell part is the linear index
+  int cell_bits = 0;     // the key's bits below the tag (Morton: D * bits)
   int ntags = 1;         // tags 0 .. ntags-1
   int key_bits = 0;      // key bits the sort looks at
 
-  CPS_HD int tag_shift() const { return D * bits; }
+  CPS_HD int tag_shift() const { return cell_bits; }
   // the keys fit a 32-bit word (and the 32-bit sentinel, all ones, stays above every real key)
   CPS_HD bool narrow() const { return key_bits <= 32; }
   CPS_HD uint64_t table_size() const { return uint64_t(ntags) * ncells; }
@@ -86,23 +95,26 @@ struct CellGridSpec {
     if (tag < 0 || tag >= ntags) return kSentinel;
     int c[D];
     cell_of(x, c);
-    return (uint64_t(tag) << tag_shift()) | morton_encode64<D>(c);
+    return (uint64_t(tag) << tag_shift()) | (rows ? linear(c) : morton_encode64<D>(c));
   }
   CPS_HD int tag_of_key(uint64_t k) const { return int(k >> tag_shift()); }
   // the cell table slot of a (non-sentinel) key
   CPS_HD uint64_t slot_of_key(uint64_t k) const {
     const int s = tag_shift();
+    const uint64_t cell = s >= 64 ? k : (k & ((uint64_t(1) << s) - 1u));
+    if (rows) return uint64_t(tag_of_key(k)) * ncells + cell;
     int c[D];
-    morton_decode64<D>(s >= 64 ? k : (k & ((uint64_t(1) << s) - 1u)), c);
+    morton_decode64<D>(cell, c);
     return uint64_t(tag_of_key(k)) * ncells + linear(c);
   }
 };
 
-// a grid over the domain [lo, hi] answering radii up to `radius`, for tags 0 .. ntags-1;
-// throws cps::Error for bad arguments or when the table would exceed max_cells ranges
+// a grid over the domain [lo, hi] answering radii up to `radius`, for tags 0 .. ntags-1, its
+// cells sorted in `order`; throws cps::Error for bad arguments or when the table would exceed
+// max_cells ranges
 template <int D>
 inline CellGridSpec<D> make_cell_grid(const Vec<D>& lo, const Vec<D>& hi, float radius, int ntags = 1,
-                                      uint64_t max_cells = kCellGridMaxCells) {
+                                      uint64_t max_cells = kCellGridMaxCells, CellOrder order = CellOrder::Morton) {
   if (!(radius > 0.0f) || !finite(radius))
     throw Error("cell grid: the radius must be positive and finite, got " + std::to_string(radius));
   if (ntags < 1) throw Error("cell grid: needs at least one tag, got " + std::to_string(ntags));
@@ -151,8 +163,14 @@ inline CellGridSpec<D> make_cell_grid(const Vec<D>& lo, const Vec<D>& hi, float 
   while ((int64_t(1) << g.bits) < int64_t(widest)) ++g.bits;
   int tag_bits = 0;  // 2^tag_bits > ntags: every real key stays below the sentinel's low key_bits bits
   while ((int64_t(1) << tag_bits) <= int64_t(ntags)) ++tag_bits;
-  g.key_bits = D * g.bits + tag_bits;
-  if (g.bits > morton_max_bits64<D>() || g.key_bits > 64)
+  g.rows = order == CellOrder::Rows;
+  g.cell_bits = D * g.bits;
+  if (g.rows) {
+    g.cell_bits = 0;
+    while ((uint64_t(1) << g.cell_bits) < ncells) ++g.cell_bits;
+  }
+  g.key_bits = g.cell_bits + tag_bits;
+  if ((!g.rows && g.bits > morton_max_bits64<D>()) || g.key_bits > 64)
     throw Error("cell grid: " + shape + " cells with " + std::to_string(ntags) + " tags need " +
                 std::to_string(g.key_bits) + " key bits, more than a 64-bit key holds: use a larger radius or fewer tags");
   return g;
@@ -249,6 +267,17 @@ struct CellGridView {
   // the 3^D block's slots in for_each_block_slot's order, less (kCull) those beyond reach
   template <bool kCull, class F>
   CPS_HD void block_slots(const Vec<D>& xi, int t0, int t1, F& f) const {
+    block_rows<kCull>(xi, t0, t1, [&](uint64_t row, int x0, int x1, int t) {
+      for (int x = x0; x <= x1; ++x) f(row + uint64_t(x), t);
+    });
+  }
+
+  // the block's rows in for_each_block_slot's order: f(row, x0, x1, t) for each row (z, y) of
+  // tag t that keeps a cell, with the table slot of its cell x at row + x and the kept cells
+  // x0 .. x1 (kCull: those within reach; the culled ones of a row are at its ends, since its
+  // middle cell lies nearest xi)
+  template <bool kCull, class F>
+  CPS_HD void block_rows(const Vec<D>& xi, int t0, int t1, F&& f) const {
     int c[D];
     spec.cell_of(xi, c);
     int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, at[3] = {0, 0, 0};
@@ -274,17 +303,20 @@ struct CellGridView {
         for (int y = lo[1]; y <= hi[1]; ++y) {
           const float gzy = gz + g2[1][y - at[1] + 1];
           if (kCull && gzy > lim) continue;
-          const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
-          for (int x = lo[0]; x <= hi[0]; ++x)
-            if (!(kCull && gzy + g2[0][x - at[0] + 1] > lim)) f(row + uint64_t(x), t);
+          int x0 = lo[0], x1 = hi[0];
+          if (kCull && x0 < at[0] && gzy + g2[0][0] > lim) x0 = at[0];
+          if (kCull && x1 > at[0] && gzy + g2[0][2] > lim) x1 = at[0];
+          f(tbase + uint64_t(z) * dxy + uint64_t(y) * dx, x0, x1, t);
         }
       }
     }
   }
 
   // the cell ranges [s, e) of sorted slots around xi's cell that may hold a slot within the
-  // query radius (for_each_near_slot's, in for_each_block_slot's order), for tags [tag_begin,
-  // tag_end) (own_tag: slot i's tag); f(s, e) for each
+  // query radius (for_each_near_slot's cells, in for_each_block_slot's order), for tags
+  // [tag_begin, tag_end) (own_tag: slot i's tag); f(s, e) for each: a cell's range, or (rows)
+  // the range of a row's kept cells, which are consecutive in the sort (an empty cell's table
+  // entry is 0, 0: the row ends at its cells' largest end and spans their sizes)
   template <class F>
   CPS_HD void for_each_cell_range(int i, const Vec<D>& xi, F&& f) const {
     int t0 = tag_begin, t1 = tag_end;
@@ -292,7 +324,19 @@ struct CellGridView {
       t0 = spec.tag_of_key(key(i));
       t1 = t0 + 1;
     }
-    for_each_near_slot(xi, t0, t1, [&](uint64_t slot, int) { f(cell_start[slot], cell_end[slot]); });
+    if (spec.rows) {
+      block_rows<true>(xi, t0, t1, [&](uint64_t row, int x0, int x1, int) {
+        uint32_t e = 0, size = 0;
+        for (int x = x0; x <= x1; ++x) {
+          const uint32_t ce = cell_end[row + uint64_t(x)];
+          size += ce - cell_start[row + uint64_t(x)];
+          e = ce > e ? ce : e;
+        }
+        f(e - size, e);
+      });
+    } else {
+      for_each_near_slot(xi, t0, t1, [&](uint64_t slot, int) { f(cell_start[slot], cell_end[slot]); });
+    }
   }
 
   // the cells' slots in for_each_cell_range's order, each cell's in sorted order

@@ -117,9 +117,11 @@ class Pipeline {
     return names[s];
   }
 
-  // cells of the support radius (lists: of the list radius, which the builds walk)
+  // cells of the support radius (lists: of the list radius, which the builds walk), sorted in
+  // rows: a walk reads each row of its block (three cells) as one range
   static CellGridSpec<D> grid_spec(const ModelT& m) {
-    return make_cell_grid<D>(m.domain_lo, m.domain_hi, kLists ? m.list_radius : m.h, 2);
+    return make_cell_grid<D>(m.domain_lo, m.domain_hi, kLists ? m.list_radius : m.h, 2, kCellGridMaxCells,
+                             CellOrder::Rows);
   }
 
   static double bytes_needed(const ModelT& m) {
