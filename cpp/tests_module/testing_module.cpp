@@ -82,6 +82,11 @@ int index_kind(const std::string& s) {
   throw nb::value_error(
       ("unknown index '" + s + "' (allpairs, allpairs_tiled, grid, csr_grid, csr_allpairs; grid_rows, csr_grid_rows)").c_str());
 }
+bool rows_order(const std::string& s) {  // a grid's cell order: true for rows, false for Morton
+  if (s == "rows") return true;
+  if (s == "morton") return false;
+  throw nb::value_error("order must be morton or rows");
+}
 int reduce_op(const std::string& s) {
   if (s == "sum") return kSum;
   if (s == "min") return kMin;
@@ -379,9 +384,8 @@ NB_MODULE(_testing, m) {
       "cell_grid_spec",
       [](int dim, std::vector<float> lo, std::vector<float> hi, float radius, int ntags, uint64_t max_cells,
          const std::string& order) {
-        if (order != "morton" && order != "rows") throw nb::value_error("order must be morton or rows");
-        if (dim == 2) return spec_dict<2>(lo, hi, radius, ntags, max_cells, order == "rows");
-        if (dim == 3) return spec_dict<3>(lo, hi, radius, ntags, max_cells, order == "rows");
+        if (dim == 2) return spec_dict<2>(lo, hi, radius, ntags, max_cells, rows_order(order));
+        if (dim == 3) return spec_dict<3>(lo, hi, radius, ntags, max_cells, rows_order(order));
         throw nb::value_error("dim must be 2 or 3");
       },
       nb::arg("dim"), nb::arg("lo"), nb::arg("hi"), nb::arg("radius"), nb::arg("ntags") = 1,
@@ -427,9 +431,8 @@ NB_MODULE(_testing, m) {
       "grid_sort",
       [](const std::string& backend, const Array& pos, float radius, std::vector<float> lo, std::vector<float> hi,
          std::optional<Array> tags, int ntags, const std::string& cells) {
-        if (cells != "morton" && cells != "rows") throw nb::value_error("order must be morton or rows");
-        IndexQuery q = query(cells == "rows" ? "grid_rows" : "grid", pos, radius, lo, hi, tags, ntags, "all", {0, 1},
-                             std::nullopt);
+        IndexQuery q = query("grid", pos, radius, lo, hi, tags, ntags, "all", {0, 1}, std::nullopt);
+        q.rows = rows_order(cells);
         std::vector<uint64_t> keys;
         std::vector<int> order;
         spatial_ops(backend)->grid_sort(q, keys, order);
@@ -441,10 +444,10 @@ NB_MODULE(_testing, m) {
       "grid_walked",
       [](const std::string& backend, const Array& pos, float radius, std::vector<float> lo, std::vector<float> hi,
          std::optional<float> query_radius, const std::string& order) {
-        if (order != "morton" && order != "rows") throw nb::value_error("order must be morton or rows");
         // (cells of the list radius, queried within the radius: as a `lists` build's view)
-        IndexQuery q = query(order == "rows" ? "grid_rows" : "grid", pos, query_radius ? *query_radius : radius, lo, hi,
-                             std::nullopt, 1, "all", {0, 1}, radius);
+        IndexQuery q = query("grid", pos, query_radius ? *query_radius : radius, lo, hi, std::nullopt, 1, "all", {0, 1},
+                             radius);
+        q.rows = rows_order(order);
         return np(spatial_ops(backend)->grid_walked(q));
       },
       nb::arg("backend"), nb::arg("positions"), nb::arg("radius"), nb::arg("lo"), nb::arg("hi"),
