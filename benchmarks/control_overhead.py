@@ -1,5 +1,5 @@
 """Stepping with and without a control change every step (Simulation.set_control before each
-step(1)), on one backend: steps/s of both and their ratio. The engine issue's target: a
+step(1)), on one backend: steps/s of both and their ratio. The aim: a
 control set every step costs no more than 1.2x stepping without it.
 
     python3 benchmarks/control_overhead.py --backend cuda --steps 2000

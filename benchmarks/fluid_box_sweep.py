@@ -1,4 +1,4 @@
-"""The fluid-box sweep of issue 9 (seed 002's tables): 128 particles, then powers of 4 from 256 to
+"""The fluid-box sweep (seed 002's tables): 128 particles, then powers of 4 from 256 to
 1,048,576 (and 4,194,304 on the GPU) x {serial allpairs, serial grid, OpenMP grid, CUDA allpairs, CUDA
 grid, CUDA compact, CUDA lists}, through `corpuscle bench --json`, with the mean neighbour count and the
 per-stage times (CUDA events) beside every figure; then the seed's speedup tables (over

@@ -1,7 +1,6 @@
-"""The 2-D wind tunnel bitwise before and after a change of its code (issue 11 templated it on
-the dimension): record the state of six short runs (grid, lbvh, allpairs, reflexive, a thermal
-stream with symplectic Euler, the collisionless validation set-up; one with the pitch control)
-on one build, compare on another. Every field and scalar must be equal to the bit.
+"""The 2-D wind tunnel bitwise before and after a change of its code: record the state of six
+short runs (grid, lbvh, allpairs, reflexive, a thermal stream with symplectic Euler, the
+collisionless validation set-up; one with the pitch control) on one build, compare on another. Every field and scalar must be equal to the bit.
 
     python benchmarks/wind_tunnel_2d_identity.py record /tmp/wt2d.npz    # on main's build
     python benchmarks/wind_tunnel_2d_identity.py compare /tmp/wt2d.npz   # on the branch's build
