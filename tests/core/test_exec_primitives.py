@@ -13,9 +13,7 @@ from corpuscle import _testing as T
 
 CUDA, CUDA_WHY = T.cuda_available()
 requires_cuda = pytest.mark.skipif(not CUDA, reason=f"no usable CUDA backend: {CUDA_WHY}")
-GPU = [pytest.mark.gpu, requires_cuda]
 
-BACKENDS = ["serial", "cpu", pytest.param("cuda", marks=GPU)]
 # empty, one, around one CUDA block (128 threads) and one CUB tile, and well beyond
 SIZES = [0, 1, 2, 127, 128, 129, 1025, 70001]
 
@@ -30,7 +28,6 @@ def exclusive_ref(x, dtype):
 # --------------------------------------------------------------------------------------
 # exclusive scan
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("n", SIZES)
 @pytest.mark.parametrize("dtype", [np.int32, np.uint32])
 @pytest.mark.parametrize("wide", [False, True], ids=["same_type", "into_int64"])
@@ -61,7 +58,6 @@ def test_exclusive_scan_serial_equals_openmp_bitwise():
 # --------------------------------------------------------------------------------------
 # stream compaction
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("n", SIZES)
 @pytest.mark.parametrize("density", [0.0, 0.03, 0.5, 1.0])
 def test_select_flagged_keeps_the_flagged_indices_in_order(backend, n, density):
@@ -87,7 +83,6 @@ def sequential_float_sum(x, init):
     return acc
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("n,nseg", [(0, 0), (0, 3), (1, 1), (129, 7), (5000, 1), (20000, 333), (3000, 3000)])
 @pytest.mark.parametrize("op", ["sum", "min", "max"])
 def test_segmented_reduce_float_matches_numpy(backend, n, nseg, op):
@@ -109,7 +104,6 @@ def test_segmented_reduce_float_matches_numpy(backend, n, nseg, op):
             assert got[s] == ref
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("op", ["sum", "min", "max"])
 def test_segmented_reduce_int_with_int64_offsets_matches_numpy(backend, op):
     rng = np.random.default_rng(3)
@@ -132,7 +126,6 @@ def test_segmented_reduce_serial_equals_openmp_bitwise():
     assert a.tobytes() == b.tobytes()
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("n", [0, 1, 1000, 300001])
 @pytest.mark.parametrize("op", ["sum", "max"])
 def test_fused_reduce_equals_the_reduction_of_stored_items_and_runs_its_follow_up(backend, n, op):
@@ -156,7 +149,6 @@ def test_fused_reduce_equals_the_reduction_of_stored_items_and_runs_its_follow_u
 # --------------------------------------------------------------------------------------
 # 64-bit key sort
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("n", SIZES)
 @pytest.mark.parametrize("bits", [64, 40, 7])
 def test_sort_pairs64_is_stable_and_matches_numpy(backend, n, bits):
@@ -173,7 +165,6 @@ def test_sort_pairs64_is_stable_and_matches_numpy(backend, n, bits):
     np.testing.assert_array_equal(vo, vals[order])
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 def test_sort_pairs64_looks_at_the_low_bits_only(backend):
     rng = np.random.default_rng(5)
     low = rng.integers(0, 2**12, 1000).astype(np.uint64)
@@ -210,7 +201,6 @@ def tile_reference(x, K):
     return out[:n]
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("tile", [32, 128])
 @pytest.mark.parametrize("n", [0, 1, 31, 32, 33, 129, 1000, 4097])
 def test_tile_lanes_share_memory_across_syncs(backend, tile, n):
@@ -221,7 +211,6 @@ def test_tile_lanes_share_memory_across_syncs(backend, tile, n):
 # --------------------------------------------------------------------------------------
 # flag-guarded loops
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("n", [0, 1, 129, 300000])
 def test_for_each_if_runs_only_when_the_flag_is_set(backend, n):
     np.testing.assert_array_equal(T.for_each_if(backend, 0, n), np.zeros(n, np.int32))
@@ -232,7 +221,6 @@ def test_for_each_if_runs_only_when_the_flag_is_set(backend, n):
 # --------------------------------------------------------------------------------------
 # atomics
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("n", [1, 129, 100000])
 def test_atomics_add_max_min_and_cas_under_contention(backend, n):
     v = np.random.default_rng(n).integers(-100, 100, n).astype(np.int32)
@@ -281,7 +269,6 @@ def test_cuda_primitives_match_the_cpu():
 
 # ---- lane widths: a stage's own number of cooperating lanes per item -------------------
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("width", [1, 2, 4, 8, 16, 32])
 def test_lanes_of_every_width_find_the_brute_force_neighbours(backend, width):
     # 300 points (not a multiple of any width, so groups of a warp end at different items)

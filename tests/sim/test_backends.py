@@ -596,7 +596,6 @@ def test_cuda_field_view_round_trips_through_dlpack():
     np.testing.assert_array_equal(got, expected)
 
 
-@pytest.mark.parametrize("backend", ["serial", "cpu", pytest.param("cuda", marks=[pytest.mark.gpu, requires_cuda])])
 def test_download_many_is_each_download(backend):
     # a frame's fields in one transfer (through pinned memory on CUDA): each array is what
     # download(name) returns, bit for bit, including the ghost fields whose count changes

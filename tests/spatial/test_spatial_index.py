@@ -17,9 +17,7 @@ from corpuscle import _testing as T
 
 CUDA, CUDA_WHY = T.cuda_available()
 requires_cuda = pytest.mark.skipif(not CUDA, reason=f"no usable CUDA backend: {CUDA_WHY}")
-GPU = [pytest.mark.gpu, requires_cuda]
 
-BACKENDS = ["serial", "cpu", pytest.param("cuda", marks=GPU)]
 # (*_rows: the grid kinds with their cells sorted in rows, as the SPH scenes sort them)
 INDEXES = ["allpairs", "allpairs_tiled", "grid", "csr_grid", "csr_allpairs", "grid_rows", "csr_grid_rows"]
 GRID_INDEXES = ["grid", "csr_grid", "grid_rows", "csr_grid_rows"]
@@ -264,7 +262,6 @@ def test_cell_grid_refuses_more_cells_than_the_limit():
         T.cell_grid_spec(3, [0, 0, 0], [3e6, 1, 1], 1.0)  # 3e6 cells along x: 22 bits per axis
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("dim", [2, 3])
 def test_grid_keys_hold_tag_above_morton_cell_and_sort_stably_with_unused_slots_last(backend, dim):
     rng = np.random.default_rng(5)
@@ -291,7 +288,6 @@ def test_grid_keys_hold_tag_above_morton_cell_and_sort_stably_with_unused_slots_
     assert np.all(np.diff(ktags.astype(np.int64)) >= 0)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("dim", [2, 3])
 def test_grid_keys_in_rows_hold_tag_above_the_linear_cell_and_need_no_more_bits_than_morton(backend, dim):
     rng = np.random.default_rng(6)
@@ -321,7 +317,6 @@ def test_grid_keys_in_rows_hold_tag_above_the_linear_cell_and_need_no_more_bits_
         T.cell_grid_spec(dim, [0.0] * dim, hi, radius, order="hilbert")
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("scene", ["uniform", "outside", "elongated"])
 @pytest.mark.parametrize("kind", ["grid", "csr_grid"])
@@ -335,7 +330,6 @@ def test_cells_in_rows_give_the_morton_grid_lists_entry_for_entry(backend, dim, 
     np.testing.assert_array_equal(a["neighbors"], b["neighbors"])
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("width", ["narrow", "wide"])
 def test_grid_keys_sort_the_same_stored_in_32_or_64_bits(backend, width):
     # keys of at most 32 bits are sorted as 32-bit words, wider ones as 64-bit: both give the
@@ -361,7 +355,6 @@ def test_grid_keys_sort_the_same_stored_in_32_or_64_bits(backend, width):
 # --------------------------------------------------------------------------------------
 # every index finds what brute force finds
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", INDEXES)
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("scene", list(SCENES))
@@ -370,7 +363,6 @@ def test_gather_finds_exactly_the_brute_force_neighbours(backend, index, dim, sc
     assert_same_neighbours(res, pos, radius, exact=backend != "cuda")
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", ["allpairs", "grid", "csr_grid", "csr_allpairs", "grid_rows", "csr_grid_rows"])  # tiled: gather only
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("scene", ["uniform", "outside", "coincident", "radius_beyond_domain"])
@@ -380,7 +372,6 @@ def test_pairs_visits_each_unordered_pair_exactly_once(backend, index, dim, scen
     assert_pairs_once(pairs, pos, radius, exact=backend != "cuda")
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", INDEXES)
 def test_gather_order_is_deterministic_and_the_same_on_serial_and_openmp(backend, index):
     a, _, _ = run_gather(backend, index, "uniform", 3)
@@ -402,7 +393,6 @@ def test_allpairs_gather_visits_in_index_order_and_tiled_matches_untiled():
             assert np.all(np.diff(seg) > 0)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", INDEXES)
 def test_nonfinite_positions_are_nobodys_neighbours_and_break_nothing(backend, index):
     pos, lo, hi, radius = uniform_box(3, n=500)
@@ -415,7 +405,6 @@ def test_nonfinite_positions_are_nobodys_neighbours_and_break_nothing(backend, i
     assert_same_neighbours(res, pos, radius, exact=backend != "cuda")
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", INDEXES)
 @pytest.mark.parametrize("dim", [2, 3])
 def test_indexes_over_no_particle_and_one_particle(backend, index, dim):
@@ -431,7 +420,6 @@ def test_indexes_over_no_particle_and_one_particle(backend, index, dim):
 # --------------------------------------------------------------------------------------
 # tags: layers and batched scenes
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", GRID_INDEXES)
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("mode", ["all", "own", "range"])
@@ -451,7 +439,6 @@ def test_grid_gathers_from_the_chosen_tags_and_skips_unused_slots(backend, index
 # --------------------------------------------------------------------------------------
 # the 4 x 1 x 1 m tank at 1 cm
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 def test_a_4x1x1_metre_domain_at_1cm_cells_finds_the_brute_force_neighbours(backend):
     rng = np.random.default_rng(13)
     centres = np.array([[0.02, 0.02, 0.02], [1.3, 0.5, 0.5], [2.71, 0.99, 0.01], [3.98, 0.5, 0.97]], np.float32)
@@ -464,7 +451,6 @@ def test_a_4x1x1_metre_domain_at_1cm_cells_finds_the_brute_force_neighbours(back
 # --------------------------------------------------------------------------------------
 # CSR lists
 # --------------------------------------------------------------------------------------
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", ["csr_grid", "csr_allpairs"])
 def test_csr_lists_equal_the_gathered_sets_and_cut_the_skin_at_query_time(backend, index):
     pos, lo, hi, radius = uniform_box(3, n=1000, seed=14)
@@ -476,7 +462,6 @@ def test_csr_lists_equal_the_gathered_sets_and_cut_the_skin_at_query_time(backen
         assert csr["capacity"] >= csr["offsets"][-1]
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("index", ["csr_grid", "csr_allpairs"])
 @pytest.mark.parametrize("dim", [2, 3])
 def test_csr_lists_grow_when_particles_crowd_and_keep_their_buffer_after(backend, index, dim):
@@ -574,7 +559,6 @@ def walked_reference(pos, cell_radius, query_radius, lo, hi):
     return near, block
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("query", [1.0, 0.8])
 def test_cell_walk_reads_only_the_cells_within_reach(backend, dim, query):

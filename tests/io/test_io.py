@@ -930,7 +930,7 @@ def test_a_zero_length_array_past_the_data_region_is_malformed(tmp_path):
         run[0]
 
 
-DOC = (__import__("pathlib").Path(__file__).resolve().parents[1] / "docs" / "frame_format.md").read_text()
+DOC = (__import__("pathlib").Path(__file__).resolve().parents[2] / "docs" / "frame_format.md").read_text()
 
 
 def test_the_documented_dtypes_are_exactly_what_the_writer_writes_and_the_reader_accepts(tmp_path):

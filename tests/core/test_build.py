@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 needs = [shutil.which("nvcc"), shutil.which("cmake"), importlib.util.find_spec("nanobind")]
 pytestmark = pytest.mark.skipif(not all(needs) or not (REPO / "CMakeLists.txt").exists(),
                                 reason="needs nvcc, cmake, nanobind and the source tree")

@@ -119,9 +119,9 @@ def test_cuda_lanes_are_reproducible(lanes):
 
 
 _GRAPH_RUN = r"""
-import sys
+import os, sys
 import numpy as np
-sys.path.insert(0, sys.argv[1])
+sys.path[:0] = [sys.argv[1], os.path.dirname(os.path.dirname(sys.argv[1]))]  # and tests/
 from test_sph_lists import by_id, rebuilds, stirred_by_id
 from test_sph_lanes import lanes_sim
 sim = stirred_by_id(lanes_sim("dam-break-2d", int(sys.argv[3]), backend="cuda", particles=2000, sph__skin=0.2))

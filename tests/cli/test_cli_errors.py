@@ -14,7 +14,7 @@ import pytest
 
 from corpuscle.cli import COMMANDS, main
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+REPO = pathlib.Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(autouse=True)
