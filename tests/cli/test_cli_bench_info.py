@@ -35,7 +35,7 @@ def test_bench_json_rows(tmp_path, capsys):
     rows = json.loads(out.read_text())
     assert isinstance(rows, list) and len(rows) == 1
     row = rows[0]
-    # the fields a benchmark record carries (README "Citing measurements": rates with the
+    # the fields a benchmark record carries (docs/benchmarks.md, "Citing measurements": rates with the
     # device, the date and the exact command)
     for key in ("scene", "backend", "particles", "steps", "repeats", "warmup", "steps_per_second",
                 "particle_steps_per_second", "seconds", "device", "date", "command"):
