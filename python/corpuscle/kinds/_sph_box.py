@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
+from ..schema import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, key_values
 
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene import INT32_MAX, INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le, check_windows
+from ..schema import INT32_MAX, INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le, check_windows
 from . import Build, Kind, Target, check_memory, core, finite_vector, key_values
 
 __all__ = ["KIND", "Magic8Ball", "MAGIC8BALL_KEYS", "SHAKE_KEYS", "DEFAULT_ANSWERS", "DIE_FACES", "UNSTABLE_REASONS"]
