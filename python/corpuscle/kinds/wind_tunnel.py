@@ -193,21 +193,20 @@ SCHEMA = SceneKind(
 
 
 # ---------------------------------------------------------------------------
-# physics helpers (the same closed forms as physics/dem.h)
+# physics helpers (the contact law's closed forms are the core's, physics/dem.h)
 # ---------------------------------------------------------------------------
 
 
 def restitution(k: float, c: float, m_eff: float) -> float:
-    """Normal restitution of the spring-dashpot law (0 when overdamped)."""
-    z = c / (2.0 * math.sqrt(k * m_eff))
-    return 0.0 if z >= 1.0 else math.exp(-math.pi * z / math.sqrt(1.0 - z * z))
+    """Normal restitution of the spring-dashpot law (0 when overdamped): the core's
+    restitution_from_damping (physics/dem.h), in double."""
+    return core().dem_restitution_for_damping(float(k), float(c), float(m_eff))
 
 
 def damping(k: float, e: float, m_eff: float) -> float:
-    """The damping c that gives restitution e."""
-    le = math.log(e)
-    z = -le / math.sqrt(math.pi ** 2 + le * le)
-    return 2.0 * z * math.sqrt(k * m_eff)
+    """The damping c that gives restitution e: the core's damping_from_restitution
+    (physics/dem.h), in double."""
+    return core().dem_damping_for_restitution(float(k), float(e), float(m_eff))
 
 
 def airfoil_polygon(values: dict[str, Any]) -> np.ndarray:
