@@ -25,7 +25,7 @@ import numpy as np
 
 from . import kinds as _kinds
 from ._errors import UnstableRunError
-from .kinds import Target, count as _count
+from .kinds import Target, count as _count, magic8ball
 from .simulation import _core, resolve_backend
 
 __all__ = ["Batch", "PER_SCENE_KEYS", "CONTROL_COLUMNS", "cube_rotations"]
@@ -199,14 +199,14 @@ class Batch:
         # per-scene parameters
         side = cols["die.side"].astype(np.float64)
         radius = float(v["container.radius"])
-        die_mass = cols["die.density"].astype(np.float64) * side ** 3
-        mass = float(v["fluid.rest_density"]) * (4.0 / 3.0 * math.pi * radius ** 3 - side ** 3) / counts
+        die_mass, die_inertia = magic8ball.die_mass_inertia(cols["die.density"].astype(np.float64), side)
+        mass = magic8ball.particle_mass(float(v["fluid.rest_density"]), radius, side, counts)
         scenes = []
         for s in range(n):
             scenes.append({"n_fluid": int(counts[s]), "mass": float(mass[s]),
                            "stiffness": float(cols["fluid.stiffness"][s]), "viscosity": float(cols["fluid.viscosity"][s]),
                            "die_half": [float(side[s]) / 2] * 3, "die_mass": float(die_mass[s]),
-                           "die_inertia": [float(die_mass[s] * side[s] ** 2 / 6.0)] * 3})
+                           "die_inertia": [float(die_inertia[s])] * 3})
         params["scenes"] = scenes
         _kinds.check_memory("magic8ball", target, params,
                             f"n = {n}, fluid.particles = {n_max}", f"{params['max_neighbors']} neighbour slots per particle")

@@ -1,4 +1,5 @@
-"""`corpuscle polar SCENE --aoa START:STOP:STEP`: a sweep over the angle of attack.
+"""A sweep over the angle of attack (`corpuscle polar SCENE --aoa START:STOP:STEP`, whose
+command is corpuscle.cli.polar).
 
 Each angle is one run of the scene (a wind-tunnel scene: every key of it, ``--set`` and
 ``--particles`` apply) to its end time; the steady-part means of C_L, C_D, C_M with their
@@ -12,17 +13,9 @@ default scene) the measured points depart from it, which is what the polar shows
 
 from __future__ import annotations
 
-import argparse
-import csv
 import math
-import pathlib
-import sys
-import time
 
 import numpy as np
-
-HELP = "sweep the angle of attack of a wind-tunnel scene: CSV and PNG of C_L, C_D (with theory)"
-DESCRIPTION = __doc__.strip().splitlines()[0]
 
 COLUMNS = ("angle_of_attack", "cl", "cl_se", "cd", "cd_se", "cm", "cm_se", "lift", "drag", "moment", "blocks",
            "steps", "particles", "theory_cl", "theory_cd")
@@ -52,20 +45,6 @@ def parse_aoa(text: str) -> list[float]:
     return vals
 
 
-def configure_parser(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", metavar="SCENE|FILE.toml", help="a wind-tunnel or wind-tunnel-3d scene (built-in name or file)")
-    p.add_argument("--aoa", required=True, metavar="START:STOP:STEP",
-                   help="angles of attack in degrees, e.g. -10:20:2 (inclusive) or 0,5,10")
-    p.add_argument("--backend", choices=("auto", "serial", "cpu", "cuda"), default="auto", help="backend")
-    p.add_argument("--particles", metavar="N", help="number of particles (gas.particles)")
-    p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], help="override a scene key")
-    p.add_argument("--end-time", metavar="T", help="run.end_time of every run (s)")
-    p.add_argument("--neighbors", metavar="INDEX", help="neighbour search (the kind's index: grid)")
-    p.add_argument("--out", metavar="PREFIX", help="write PREFIX.csv and PREFIX.png (default: polar-SCENE)")
-    p.add_argument("--no-plot", action="store_true", help="the CSV only")
-    p.add_argument("--no-progress", action="store_true", help="no progress lines")
-
-
 def theory_curves(scene, angles) -> dict[str, np.ndarray]:
     """The thin flat plate's free-molecular C_L, C_D for the scene's wing restitution and stream."""
     from . import free_molecular as fm
@@ -80,64 +59,6 @@ def theory_curves(scene, angles) -> dict[str, np.ndarray]:
     S = math.inf if ratio == 0 else 1.0 / ratio
     th = fm.thin_plate(np.asarray(angles, dtype=np.float64), S, e)
     return {"cl": th["cl"], "cd": th["cd"], "restitution": e, "speed_ratio": S}
-
-
-def run_command(args: argparse.Namespace) -> int:
-    from .cli import UsageError, _float_option, _int_option, _load_with_options, _import_core_module
-
-    angles = parse_aoa(args.aoa)
-    args.particles = _int_option("--particles", args.particles, minimum=1)
-    end = _float_option("--end-time", args.end_time)
-    if end is not None and not end > 0:
-        raise UsageError(f"--end-time must be positive, got {args.end_time!r}")
-    scene = _load_with_options(args, {})
-    if scene.kind not in ("wind-tunnel", "wind-tunnel-3d"):  # 3-D: the coefficients per unit span, the same theory
-        raise UsageError(f"polar: scene {scene.name!r} is of kind {scene.kind!r}; polar sweeps a wind-tunnel or "
-                         f"wind-tunnel-3d scene")
-    if end is not None:
-        scene = scene.with_overrides({"run.end_time": end})
-    prefix = pathlib.Path(args.out) if args.out else pathlib.Path(f"polar-{scene.name}")
-    if not prefix.parent.is_dir():
-        raise UsageError(f"--out {args.out}: folder {prefix.parent} does not exist")
-    for a in angles:  # every scene is checked before the first run
-        scene.with_overrides({"airfoil.angle_of_attack": a})
-    simulation = _import_core_module("corpuscle.simulation")
-    Simulation = simulation.Simulation
-    backend = args.backend
-    if backend == "auto":
-        backend = "cuda" if Simulation.cuda_available() else "cpu"
-    th = theory_curves(scene, angles)
-    rows = []
-    for i, a in enumerate(angles):
-        t0 = time.perf_counter()
-        sc = scene.with_overrides({"airfoil.angle_of_attack": a})
-        sim = Simulation.from_scene(sc, backend=backend, neighbors=args.neighbors)
-        sim.run(until=float(sc.values["run.end_time"]), chunk=500)
-        r = sim.result()
-        row = {"angle_of_attack": a, "steps": int(sim.steps), "particles": int(sim.n_particles),
-               "theory_cl": float(th["cl"][i]), "theory_cd": float(th["cd"][i])}
-        for k in ("cl", "cl_se", "cd", "cd_se", "cm", "cm_se", "lift", "drag", "moment", "blocks"):
-            row[k] = r.get(k, float("nan"))
-        rows.append(row)
-        if not args.no_progress:
-            print(f"alpha {a:7.3f} deg: C_L {row['cl']:.4g} ± {row['cl_se']:.2g}, C_D {row['cd']:.4g} ± "
-                  f"{row['cd_se']:.2g} ({row['steps']} steps, {time.perf_counter() - t0:.1f} s)", file=sys.stderr)
-        del sim
-    csv_path = prefix.with_name(prefix.name + ".csv")
-    try:
-        with open(csv_path, "w", newline="", encoding="utf-8") as f:
-            w = csv.DictWriter(f, fieldnames=COLUMNS)
-            w.writeheader()
-            for row in rows:
-                w.writerow({k: row[k] for k in COLUMNS})
-    except OSError as exc:
-        raise UsageError(f"cannot write {csv_path}: {exc.strerror or exc}") from None
-    print(f"wrote {csv_path}")
-    if not args.no_plot:
-        png = prefix.with_name(prefix.name + ".png")
-        plot_polar(rows, th, scene, png)
-        print(f"wrote {png}")
-    return 0
 
 
 def plot_polar(rows, th, scene, path) -> None:

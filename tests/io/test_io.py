@@ -1131,7 +1131,7 @@ def test_last_checkpoint_is_none_without_checkpoints(tmp_path):
 
 
 def test_a_file_full_of_frame_magics_is_scanned_in_bounded_time(tmp_path, monkeypatch):
-    import corpuscle.io as cio
+    import corpuscle._frame_reader as cio  # the reader's checksums
 
     # frame 0, then a damaged frame 1, then a frame magic at every 64-byte slot, each claiming
     # index 1 and a table running to the end of the file (and failing its checksum)

@@ -117,7 +117,7 @@ def test_default_bind_is_localhost_and_other_addresses_need_a_token():
     assert s.host == "127.0.0.1" and s.token is None
     with pytest.raises(ValueError, match="token"):
         LiveServer(dict(HEADER), host="0.0.0.0")
-    from corpuscle.cli import _live_options  # the command line's default
+    from corpuscle.cli._options import live_options as _live_options  # the command line's default
     import argparse
 
     args = argparse.Namespace(live=True, port=None, host=None)

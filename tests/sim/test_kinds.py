@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import corpuscle.scene as sc
+import corpuscle.schema as schema
 from corpuscle import kinds
 from corpuscle.cli import main
 from corpuscle.kinds import magic8ball
@@ -81,8 +82,11 @@ class ToyKind(kinds.Kind):
 def toy(monkeypatch):
     """Register ToyKind for one test (registry and loader tables restored after)."""
     monkeypatch.setattr(kinds, "_REGISTRY", dict(kinds._REGISTRY))
-    monkeypatch.setattr(sc, "KINDS", dict(sc.KINDS))
-    monkeypatch.setattr(sc, "SCHEMAS", dict(sc.SCHEMAS))
+    # the tables live in corpuscle.schema; corpuscle.scene reads the same objects
+    for name in ("KINDS", "SCHEMAS"):
+        table = dict(getattr(schema, name))
+        monkeypatch.setattr(schema, name, table)
+        monkeypatch.setattr(sc, name, table)
     return kinds.register(ToyKind())
 
 
@@ -158,11 +162,12 @@ def test_particles_option_sets_the_kinds_particle_key(tmp_path, monkeypatch):
     import argparse
 
     from corpuscle import cli
+    from corpuscle.cli import _run_plan
 
     monkeypatch.chdir(tmp_path)
     parser = cli.build_parser()
     args = parser.parse_args(["run", "magic8ball", "--particles", "777", "--set", "fluid.particles=500"])
-    plan = cli._run_prepare(args)
+    plan = _run_plan.prepare(args)
     assert plan.scene["fluid.particles"] == 777
     assert isinstance(args, argparse.Namespace)
 
@@ -170,12 +175,12 @@ def test_particles_option_sets_the_kinds_particle_key(tmp_path, monkeypatch):
 def test_the_kind_writes_the_run_summary_lines(toy, capsys):
     from types import SimpleNamespace
 
-    from corpuscle import cli
+    from corpuscle.cli import run
 
     summary = {"scene": "t", "backend": "cpu", "particles": 10, "ghosts": None, "steps": 1, "sim_time": 0.1,
                "init_time": 0.0, "wall_time": 1.0, "steps_per_second": 1.0, "particle_steps_per_second": 10.0,
                "frames": 1, "out": "t.cps", "result": {"word": "yes", "lift": 2.5}}
-    cli._print_run_summary(summary, SimpleNamespace(kind="toy", path=None, builtin=True))
+    run.print_summary(summary, SimpleNamespace(kind="toy", path=None, builtin=True))
     out = capsys.readouterr().out.splitlines()
     assert "toy says: yes" in out and out[-1].split() == ["lift", "2.5"] and "8-ball says" not in "".join(out)
     # the 8-ball's: the answer line, then the rest as rows

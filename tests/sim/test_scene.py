@@ -499,8 +499,12 @@ def test_interval_text():
 
 
 def test_new_kind_can_be_registered(monkeypatch):
-    monkeypatch.setattr(sc, "KINDS", dict(sc.KINDS))
-    monkeypatch.setattr(sc, "SCHEMAS", dict(sc.SCHEMAS))
+    from corpuscle import schema
+
+    for name in ("KINDS", "SCHEMAS"):  # the tables live in corpuscle.schema; scene reads the same objects
+        table = dict(getattr(schema, name))
+        monkeypatch.setattr(schema, name, table)
+        monkeypatch.setattr(sc, name, table)
     sc.register_kind(
         sc.SceneKind(
             name="toy",

@@ -118,9 +118,9 @@ import math
 
 import numpy as np
 
-from .. import scene as _scene
+from .. import schema as _schema
 from .._errors import MemoryNeedError
-from ..scene import SceneError, SceneKind
+from ..schema import SceneError, SceneKind
 
 __all__ = ["Kind", "Build", "Target", "register", "find", "get", "registry", "count", "finite_vector",
            "particle_array", "fmt_bytes", "check_memory", "key_values", "kind_method", "core"]
@@ -244,7 +244,7 @@ _REGISTRY: dict[str, Kind] = {}
 
 
 def register(kind: Kind) -> Kind:
-    """Add a kind (and its schema to :mod:`corpuscle.scene`); a later one of the same name
+    """Add a kind (and its schema to :mod:`corpuscle.schema`); a later one of the same name
     replaces it."""
     if not isinstance(kind, Kind):
         raise TypeError(f"a scene kind must be a corpuscle.kinds.Kind, got {type(kind).__name__}")
@@ -259,7 +259,7 @@ def register(kind: Kind) -> Kind:
     absent = [m for m in kind.methods if not callable(getattr(kind, m, None))]
     if absent:
         raise TypeError(f"scene kind {kind.name!r}: methods {', '.join(absent)} are not defined")
-    _scene.register_kind(schema)
+    _schema.register_kind(schema)
     _REGISTRY[kind.name] = kind
     return kind
 

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ..scene import KeySpec, SceneError
+from ..schema import KeySpec, SceneError
 from ._sph_box import SphBox, column_height, common_keys, dam_front, make_schema
 
 A_DEFAULT = 0.146  # m, Koshizuka & Oka's column width

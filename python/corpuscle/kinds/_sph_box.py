@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from ..scene import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
-from . import Build, Kind, Target, check_memory, key_values
+from ..schema import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
+from . import Build, Kind, Target, check_memory, core, key_values
 
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
 VISCOSITIES = {"artificial": 0, "laminar": 1}
@@ -121,9 +121,12 @@ def lattice(lo_cells, hi_cells, dp: float) -> np.ndarray:
 
 
 def hydrostatic_density(depth, rho0: float, B: float, gamma: float, g: float) -> np.ndarray:
-    """rho = rho0 (1 + rho0 g d / B)^(1/gamma): Tait's density at depth d (d <= 0: rho0)."""
+    """rho = rho0 (1 + rho0 g d / B)^(1/gamma): Tait's density (the core's inverse of its
+    equation of state, physics/tait.h, in double) at the pressure rho0 g d of depth d (d <= 0:
+    rho0)."""
     d = np.maximum(np.asarray(depth, dtype=np.float64), 0.0)
-    return rho0 * (1.0 + rho0 * g * d / B) ** (1.0 / gamma)
+    p = np.ascontiguousarray(rho0 * g * d, dtype=np.float64)
+    return core().tait_density(p.ravel(), rho0, B, gamma).reshape(p.shape)
 
 
 class SphBox(Kind):
@@ -186,7 +189,7 @@ class SphBox(Kind):
             raise SceneError("fluid.gravity = 0 needs fluid.sound_speed > 0 (c0 is otherwise taken from the "
                              "free-fall speed sqrt(2 g H))")
         c0 = float(v["fluid.sound_speed"]) or float(v["fluid.sound_factor"]) * math.sqrt(2.0 * g * height)
-        B = c0 * c0 * rho0 / gamma
+        B = core().tait_stiffness(c0, rho0, gamma)  # c0^2 rho0 / gamma (physics/tait.h, in double)
         box_hi = nb * dp
         probes = [p["position"] for p in scene.arrays.get("probes", [])]
         gravity = [0.0] * (D - 1) + [-g]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import KeySpec, SceneError
+from ..schema import KeySpec, SceneError
 from ._sph_box import SphBox, common_keys, make_schema
 
 KEYS = common_keys(3, end_time=0.5, record_every=100, smoothing=1.732, alpha=0.05)

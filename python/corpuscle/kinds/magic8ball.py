@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene import INT32_MAX, INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le, check_windows
+from ..schema import INT32_MAX, INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le, check_windows
 from . import Build, Kind, Target, check_memory, core, finite_vector, key_values
 
 __all__ = ["KIND", "Magic8Ball", "MAGIC8BALL_KEYS", "SHAKE_KEYS", "DEFAULT_ANSWERS", "DIE_FACES", "UNSTABLE_REASONS"]
@@ -152,6 +152,24 @@ SCHEMA = SceneKind(
 # ---------------------------------------------------------------------------
 
 
+def fluid_volume(radius, side):
+    """The fluid's volume: the sphere of the container less the die (scalars or arrays)."""
+    return 4.0 / 3.0 * math.pi * radius ** 3 - side ** 3
+
+
+def particle_mass(rest_density, radius, side, n):
+    """The mass of one of n fluid particles filling the container at rest density (the single
+    scene's and, per scene as arrays, the batch's)."""
+    return rest_density * fluid_volume(radius, side) / n
+
+
+def die_mass_inertia(density, side):
+    """The die's mass and its moment of inertia about each axis, m side^2 / 6 (a solid cube;
+    scalars or arrays)."""
+    mass = density * side ** 3
+    return mass, mass * side ** 2 / 6.0
+
+
 def _random_quaternion(rng: np.random.Generator) -> np.ndarray:
     # uniform on SO(3) (Shoemake 1992)
     u1, u2, u3 = rng.random(3)
@@ -213,15 +231,14 @@ class Magic8Ball(Kind):
             h *= (float(v["sph.reference_particles"]) / n) ** (1.0 / 3.0)
         side = float(v["die.side"])
         half = side / 2
-        die_mass = float(v["die.density"]) * side ** 3
+        die_mass, die_inertia = die_mass_inertia(float(v["die.density"]), side)
         rest = float(v["fluid.rest_density"])
         seed = int(v["run.seed"])
         rng = np.random.default_rng(seed)
         die_q = _random_quaternion(rng)
         die_pos = np.asarray(v["die.position"], dtype=np.float32)
         margin = float(v["die.contact_margin"]) * h
-        fluid_volume = 4.0 / 3.0 * math.pi * radius ** 3 - side ** 3
-        mass = rest * fluid_volume / n
+        mass = particle_mass(rest, radius, side, n)
         params = {
             "n_fluid": n, "h": h, "mass": mass, "rest_density": rest,
             "stiffness": v["fluid.stiffness"], "gamma": v["fluid.gamma"], "viscosity": v["fluid.viscosity"],
@@ -229,7 +246,7 @@ class Magic8Ball(Kind):
             "radius": radius, "wall_restitution": v["container.restitution"],
             "wall_friction": v["container.friction"], "shell_inertia": v["container.shell_inertia"],
             "spin_damping": v["container.spin_damping"], "gravity": list(v["gravity.g"]),
-            "die_half": [half] * 3, "die_mass": die_mass, "die_inertia": [die_mass * side ** 2 / 6.0] * 3,
+            "die_half": [half] * 3, "die_mass": die_mass, "die_inertia": [die_inertia] * 3,
             "contact_margin": margin, "contact_stiffness": v["die.contact_stiffness"],
             "contact_drag": v["die.drag"], "die_restitution": v["die.restitution"],
             "die_linear_damping": v["die.linear_damping"], "die_angular_damping": v["die.angular_damping"],
@@ -255,7 +272,7 @@ class Magic8Ball(Kind):
         # a few percent; a list that still overflows stops the run as unstable), in warp widths
         # and never more than every particle and ghost there is
         def capacity(reach):
-            mean = 4.0 / 3.0 * math.pi * reach ** 3 * n / fluid_volume
+            mean = 4.0 / 3.0 * math.pi * reach ** 3 * n / fluid_volume(radius, side)
             return min(int(math.ceil((2.5 * mean + 32) / 32.0)), int(math.ceil(2 * n / 32.0))) * 32
 
         params["max_neighbors"] = capacity(list_radius)

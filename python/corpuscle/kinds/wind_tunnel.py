@@ -28,8 +28,9 @@ from typing import Any
 import numpy as np
 
 from .. import airfoils
-from ..scene import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
+from ..schema import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
+from ._wind_tunnel_start import KMAX_ROWS, conveyor, place, signed_distance  # noqa: F401  (public here)
 
 __all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "restitution", "damping",
            "airfoil_polygon", "coefficients"]
@@ -39,7 +40,6 @@ __all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "resti
 MAX_PITCH = 45.0
 
 DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 131_072, "serial": 131_072}
-KMAX_ROWS = 16384  # the inflow conveyor's rows the core holds (scenes/wind_tunnel/model.h kMaxRows)
 
 # the LBVH traversal stack (entries per thread; shared memory on CUDA): the default and the most
 LBVH_STACK, LBVH_MAX_STACK = 32, 128
@@ -193,21 +193,20 @@ SCHEMA = SceneKind(
 
 
 # ---------------------------------------------------------------------------
-# physics helpers (the same closed forms as physics/dem.h)
+# physics helpers (the contact law's closed forms are the core's, physics/dem.h)
 # ---------------------------------------------------------------------------
 
 
 def restitution(k: float, c: float, m_eff: float) -> float:
-    """Normal restitution of the spring-dashpot law (0 when overdamped)."""
-    z = c / (2.0 * math.sqrt(k * m_eff))
-    return 0.0 if z >= 1.0 else math.exp(-math.pi * z / math.sqrt(1.0 - z * z))
+    """Normal restitution of the spring-dashpot law (0 when overdamped): the core's
+    restitution_from_damping (physics/dem.h), in double."""
+    return core().dem_restitution_for_damping(float(k), float(c), float(m_eff))
 
 
 def damping(k: float, e: float, m_eff: float) -> float:
-    """The damping c that gives restitution e."""
-    le = math.log(e)
-    z = -le / math.sqrt(math.pi ** 2 + le * le)
-    return 2.0 * z * math.sqrt(k * m_eff)
+    """The damping c that gives restitution e: the core's damping_from_restitution
+    (physics/dem.h), in double."""
+    return core().dem_damping_for_restitution(float(k), float(e), float(m_eff))
 
 
 def airfoil_polygon(values: dict[str, Any]) -> np.ndarray:
@@ -222,38 +221,6 @@ def airfoil_polygon(values: dict[str, Any]) -> np.ndarray:
             raise SceneError(f"airfoil.shape: {e}") from None
     return airfoils.place(base, float(values["airfoil.chord"]), float(values["airfoil.angle_of_attack"]),
                           tuple(values["airfoil.leading_edge"]))
-
-
-def _inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Crossing-parity point in polygon, vectorised over points."""
-    inside = np.zeros(len(pts), dtype=bool)
-    x, y = pts[:, 0], pts[:, 1]
-    a, b = poly, np.roll(poly, -1, axis=0)
-    for (ax, ay), (bx, by) in zip(a, b):
-        cross = (ay > y) != (by > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xi = ax + (y - ay) * (bx - ax) / (by - ay)
-        inside ^= cross & (x < xi)
-    return inside
-
-
-def _distance(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Unsigned distance from points to the polygon's boundary."""
-    d2 = np.full(len(pts), np.inf)
-    a, b = poly, np.roll(poly, -1, axis=0)
-    for p0, p1 in zip(a, b):
-        e = p1 - p0
-        t = np.clip(((pts - p0) @ e) / max(float(e @ e), 1e-300), 0.0, 1.0)
-        q = p0 + t[:, None] * e
-        d2 = np.minimum(d2, np.einsum("ij,ij->i", pts - q, pts - q))
-    return np.sqrt(d2)
-
-
-def signed_distance(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Signed distance (negative inside), float64, for tests and placement."""
-    pts = np.asarray(pts, dtype=np.float64)
-    d = _distance(poly, pts)
-    return np.where(_inside(poly, pts), -d, d)
 
 
 def coefficients(values: dict[str, float], rho: float, U: float, chord: float) -> dict[str, float]:
@@ -287,12 +254,15 @@ class WindTunnel(Kind):
             def pm(k):
                 v, e = result.get(k), result.get(k + "_se")
                 return f"{v:.4g} ± {e:.2g}" if v is not None and e is not None and math.isfinite(e) else f"{v:.4g}"
-            if result.get("blocks", 0) > 0:
+            blocks = result.get("blocks", 0)
+            if blocks > 0:
                 lines.append(f"C_L = {pm('cl')}, C_D = {pm('cd')}, C_M = {pm('cm')} "
-                             f"(over {result['blocks']} blocks from t = {result['measure_start']:.4g} s)")
+                             f"(over {blocks} block{'s' if blocks > 1 else ''} from t = {result['measure_start']:.4g} s"
+                             + ("; no error estimate from one block)" if blocks == 1 else ")"))
             else:
-                lines.append(f"no forces averaged yet (the steady part starts at t = {result['measure_start']:.4g} s)")
-                # nothing measured: the means and their errors are not printed as nan rows
+                # nothing measured (null in --json): the means and their errors are not printed as nan rows
+                lines.append(f"C_L, C_D, C_M: not measured (the run ended before the measurement window at "
+                             f"t = {result['measure_start']:.4g} s)")
                 for k in ("lift", "drag", "moment", "lift_se", "drag_se", "moment_se"):
                     rest.pop(k, None)
             for k in ("cl", "cd", "cm", "cl_se", "cd_se", "cm_se"):
@@ -362,13 +332,13 @@ class WindTunnel(Kind):
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
         if params["collide"] and params["thermal"] == 0.0 and v["inflow.lattice"]:
-            params.update(self._conveyor(n, radius, lo, hi, poly))
+            params.update(conveyor(n, radius, lo, hi, poly))
         check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius", "grid.cell")),
                      f"{n} particles")
         if len(poly) > 1024:
             raise SceneError(f"airfoil.shape: {len(poly)} vertices, at most 1024")
         if checkpoint is None:
-            pos, vel = self._place(n, radius, lo, hi, poly, params, int(v["run.seed"]))
+            pos, vel = place(n, radius, lo, hi, poly, params, int(v["run.seed"]))
         else:
             pos = np.ascontiguousarray(checkpoint["position"], dtype=np.float32)
             vel = np.ascontiguousarray(checkpoint["velocity"], dtype=np.float32)
@@ -385,173 +355,6 @@ class WindTunnel(Kind):
         arrays = {"position": pos, "velocity": vel, "airfoil": np.ascontiguousarray(poly, dtype=np.float32)}
         return Build(params, arrays, info)
 
-    @staticmethod
-    def _start_spacing(n, radius, lo, hi, poly):
-        """The start lattice's extent (a radius off the walls; the whole periodic span in 3-D)
-        and spacing: n sites and 10% more over the free area (x-y, less the section) or volume."""
-        ext = hi - lo - 2 * radius
-        if len(lo) == 3:
-            ext[2] = hi[2] - lo[2]  # the periodic span: no wall to keep clear of
-        free = float(np.prod(ext[:2])) - abs(airfoils.signed_area(poly))
-        a = math.sqrt(free / (n * 1.1)) if len(lo) == 2 else (free * ext[2] / (n * 1.1)) ** (1 / 3)
-        return ext, a
-
-    @staticmethod
-    def _place(n, radius, lo, hi, poly, params, seed):
-        """A jittered square lattice over the channel, a radius clear of the walls and the
-        airfoil, n of its sites drawn at random; velocities are the free stream. A
-        collisionless gas (contact.enabled = false) is a uniform random (Poisson) gas instead:
-        its particles may overlap."""
-        rng = np.random.default_rng(seed)
-        if not params.get("collide", 1):
-            return WindTunnel._place_uniform(n, radius, lo, hi, poly, params, rng)
-        if params.get("conv_rows", 0):
-            return WindTunnel._place_conveyor(n, radius, lo, hi, poly, params, rng)
-        d = len(lo)
-        ext, a = WindTunnel._start_spacing(n, radius, lo, hi, poly)
-        if a <= 2 * radius * 1.0001:
-            raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
-                             f"(lattice spacing {a:.3g} m < a diameter)")
-        while True:
-            # at least one site each way: a spacing wider than the channel (a handful of
-            # particles) would leave no row and divide by zero
-            counts = [max(1, int(ext[k] / a)) for k in range(d)]
-            axes = [lo[k] + radius + (np.arange(counts[k]) + 0.5) * (ext[k] / counts[k]) for k in range(2)]
-            if d == 3:
-                axes.append(lo[2] + (np.arange(counts[2]) + 0.5) * (ext[2] / counts[2]))
-            grids = np.meshgrid(*axes, indexing="ij")
-            pts = np.column_stack([g.ravel() for g in grids])
-            gap = min(ext[k] / counts[k] for k in range(d))
-            pts += rng.uniform(-1, 1, pts.shape) * 0.45 * (gap - 2 * radius)
-            box_lo, box_hi = poly.min(axis=0) - 2 * radius, poly.max(axis=0) + 2 * radius
-            near = np.all((pts[:, :2] > box_lo) & (pts[:, :2] < box_hi), axis=1)
-            keep = np.ones(len(pts), dtype=bool)
-            if near.any():  # the airfoil section (extruded along z in 3-D): the x-y distance
-                keep[near] = signed_distance(poly, pts[near][:, :2]) > 1.05 * radius
-            pts = pts[keep]
-            if len(pts) >= n:
-                break
-            a *= 0.97
-            if a <= 2 * radius * 1.0001:
-                raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit around the airfoil")
-        pick = np.sort(rng.choice(len(pts), size=n, replace=False))
-        pos = pts[pick]
-        U = params["speed"]
-        sigma = params["thermal"] * U
-        vel = np.zeros_like(pos)
-        vel[:, 0] = U
-        if sigma > 0:
-            vel += rng.normal(0.0, sigma, vel.shape)
-        return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
-
-    @staticmethod
-    def _conveyor_slots(radius, lo, hi, c):
-        """Unjittered slot centres of the cold beam's lattice over the channel: row r at height
-        y0 + (r mod ny) dy (3-D: in the span's layer r // ny, z0 + (r // ny) dz), columns dx
-        apart from the inlet at the row's phase (stages.h, "The inflow conveyor": the same
-        formulas, so the stream entering later continues this lattice)."""
-        rows, ny, dx, dy = c["conv_rows"], c["conv_ny"], c["conv_dx"], c["conv_dy"]
-        g = np.arange(rows) * 0.6180339887498949
-        phase = dx * (g - np.floor(g))
-        L = hi[0] - lo[0]
-        ncol = np.maximum(np.ceil((L - phase) / dx).astype(np.int64) - 1, 0)  # columns 1 .. ncol
-        r = np.repeat(np.arange(rows), ncol)
-        col = np.concatenate([np.arange(1, k + 1) for k in ncol]) if rows else np.empty(0, np.int64)
-        x = lo[0] + phase[r] + col * dx
-        cols = [x, c["conv_y0"] + (r % ny) * dy]
-        if len(lo) == 3:
-            cols.append(c["conv_z0"] + (r // ny) * c["conv_dz"])
-        pts = np.column_stack(cols)
-        return pts[x < hi[0]]
-
-    @staticmethod
-    def _conveyor(n, radius, lo, hi, poly) -> dict:
-        """The inflow conveyor of a cold beam with contacts: the start lattice's rows and
-        spacing (n sites and 10% more over the free area or volume, as the random start had),
-        so the stream that enters later is the lattice the run starts from. Deterministic (no
-        random numbers): a resumed run rebuilds the same one. More rows than the core holds
-        (stages.h kMaxRows): no conveyor (re-entry at random heights)."""
-        d = len(lo)
-        ext, a = WindTunnel._start_spacing(n, radius, lo, hi, poly)
-        while True:
-            if a <= 2 * radius * 1.0001:
-                raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
-                                 f"(lattice spacing {a:.3g} m < a diameter)")
-            ny = max(1, int(ext[1] / a))
-            nz = max(1, int(ext[2] / a)) if d == 3 else 1
-            if ny * nz > KMAX_ROWS:
-                return {"conv_rows": 0}
-            c = {"conv_rows": ny * nz, "conv_ny": ny, "conv_y0": lo[1] + radius + 0.5 * ext[1] / ny,
-                 "conv_dy": ext[1] / ny, "conv_dx": a}
-            if d == 3:
-                c.update(conv_z0=lo[2] + 0.5 * ext[2] / nz, conv_dz=ext[2] / nz)
-            if min(c["conv_dy"], c.get("conv_dz", a)) > 2 * radius * 1.0001:
-                pts = WindTunnel._conveyor_slots(radius, lo, hi, c)
-                gaps = [a - 2 * radius, c["conv_dy"] - 2 * radius] + ([c["conv_dz"] - 2 * radius] if d == 3 else [])
-                jitter = 0.45 * math.hypot(gaps[0], gaps[1])  # in x-y, where the airfoil is
-                if len(pts) >= n and np.count_nonzero(WindTunnel._clear(pts[:, :2], poly, 1.05 * radius + jitter)) >= n:
-                    return c
-            a *= 0.97
-
-    @staticmethod
-    def _clear(pts, poly, clearance):
-        box_lo, box_hi = poly.min(axis=0) - clearance, poly.max(axis=0) + clearance
-        near = np.all((pts > box_lo) & (pts < box_hi), axis=1)
-        keep = np.ones(len(pts), dtype=bool)
-        if near.any():
-            keep[near] = signed_distance(poly, pts[near]) > clearance
-        return keep
-
-    @staticmethod
-    def _place_conveyor(n, radius, lo, hi, poly, params, rng):
-        """The start as the conveyor's lattice (see _conveyor): its slots jittered as the entering
-        ones are, those 1.05 radii clear of the airfoil kept, n of them drawn at random."""
-        d = len(lo)
-        pts = WindTunnel._conveyor_slots(radius, lo, hi, params)
-        gaps = [params["conv_dx"], params["conv_dy"]] + ([params["conv_dz"]] if d == 3 else [])
-        pts = pts + rng.uniform(-1, 1, pts.shape) * 0.45 * (np.array(gaps) - 2 * radius)
-        # the last column up to the outflow, never past it: a column trimmed short of it would
-        # start the stream leaving late, and the conveyor's first slots would pass unfilled (a
-        # seam of vacancies moving downstream). Pulled back by at most its jitter, a slot stays
-        # more than a diameter from its neighbours (0.1 dx + 1.8 r apart at least)
-        pts[:, 0] = np.minimum(pts[:, 0], float(np.nextafter(np.float32(hi[0]), np.float32(-np.inf))))  # (float32)
-        if d == 3:  # the periodic span
-            pts[:, 2] = lo[2] + np.mod(pts[:, 2] - lo[2], hi[2] - lo[2])
-        pts = pts[WindTunnel._clear(pts[:, :2], poly, 1.05 * radius)]  # (_conveyor made sure n of them are)
-        pick = np.sort(rng.choice(len(pts), size=n, replace=False))
-        pos = pts[pick]
-        vel = np.zeros_like(pos)
-        vel[:, 0] = params["speed"]
-        return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
-
-    @staticmethod
-    def _place_uniform(n, radius, lo, hi, poly, params, rng):
-        d = len(lo)
-        pts = np.empty((0, d))
-        # a radius off the walls; from the inflow to the outflow in x, as the stream fills it
-        # (a gap there would travel down the channel as a hole in the stream); all of the
-        # periodic span in 3-D
-        off = np.zeros(d)
-        off[1] = radius
-        a, b = lo + off, hi - off
-        box_lo, box_hi = poly.min(axis=0) - radius, poly.max(axis=0) + radius
-        while len(pts) < n:
-            p = rng.uniform(a, b, (int(1.2 * (n - len(pts))) + 16, d))
-            near = np.all((p[:, :2] > box_lo) & (p[:, :2] < box_hi), axis=1)
-            keep = np.ones(len(p), dtype=bool)
-            if near.any():
-                keep[near] = signed_distance(poly, p[near][:, :2]) > radius
-            pts = np.concatenate([pts, p[keep]])
-        pos = pts[:n]
-        U = params["speed"]
-        sigma = params["thermal"] * U
-        vel = np.zeros_like(pos)
-        vel[:, 0] = U
-        if sigma > 0:
-            vel += rng.normal(0.0, sigma, vel.shape)
-        return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
-
-    # reading -------------------------------------------------------------------------
     def state(self, sim, s: dict[str, Any]) -> dict[str, Any]:
         f = s["airfoil_force"]
         b = float(sim.info["span"]) if self.dim == 3 else None  # lift, drag, moment per unit span

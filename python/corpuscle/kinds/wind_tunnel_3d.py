@@ -18,7 +18,7 @@ C_L = L' / (rho U^2 c / 2), L' the lift per unit span (the whole span's lift / s
 
 from __future__ import annotations
 
-from ..scene import SceneKind
+from ..schema import SceneKind
 from .wind_tunnel import WindTunnel, _channel_room, _one_thermal, keys_3d
 
 __all__ = ["KIND", "WindTunnel3D", "DEFAULT_PARTICLES", "WIND_TUNNEL_3D_KEYS"]

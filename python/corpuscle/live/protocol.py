@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import _json
+
 MAGIC = b"CPSL"
 VERSION = 1
 HEAD = struct.Struct("<4sIIIqdIIII")  # magic, version, flags, index, step, time, n, dim, json_len, color_bytes
@@ -54,31 +56,8 @@ def _pad4(n: int) -> int:
     return (-n) % 4
 
 
-def json_default(obj: Any) -> Any:
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if hasattr(obj, "item"):
-        return obj.item()
-    return str(obj)
-
-
-def _finite_json(obj: Any) -> Any:
-    """NaN and infinities as null (JSON has neither)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _finite_json(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite_json(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _finite_json(obj.tolist())
-    if isinstance(obj, np.generic):
-        return _finite_json(obj.item())
-    return obj
-
-
 def dumps(obj: Any) -> str:
-    return json.dumps(_finite_json(obj), default=json_default, allow_nan=False)
+    return _json.dumps(obj)  # NaN and infinities as null (JSON has neither)
 
 
 def domain_box(header: dict[str, Any], positions: np.ndarray | None = None) -> tuple[list[float], list[float]]:

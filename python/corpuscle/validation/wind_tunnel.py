@@ -293,10 +293,10 @@ def discrete_restitution(e: float, wdt: float, phases: int = 4096) -> float:
     continuous law's e when wdt -> 0). The damping c is the continuous law's for e."""
     if e >= 1.0:
         return 1.0
-    le = math.log(e)
-    z = -le / math.sqrt(math.pi ** 2 + le * le)
+    from ..kinds.wind_tunnel import damping
+
     dt = wdt  # omega = 1, m = 1, k = 1
-    c = 2.0 * z
+    c = damping(1.0, e, 1.0)
     ph = (np.arange(phases) + 0.5) / phases
     x = ph * dt  # overlap at the first step in contact (approach speed 1)
     v = np.ones(phases)  # approach speed

@@ -391,8 +391,8 @@ def test_conveyor_only_for_a_cold_beam_with_contacts_and_within_its_rows():
     lo, hi = np.array([-1.78, -1.0]), np.array([1.78, 1.0])
     poly = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.01]])
     # more rows than the core holds: no conveyor (random heights), never an error
-    assert wt.WindTunnel._conveyor(10**9, 1e-6, lo, hi, poly) == {"conv_rows": 0}
-    c = wt.WindTunnel._conveyor(20000, 0.003, lo, hi, poly)
+    assert wt.conveyor(10**9, 1e-6, lo, hi, poly) == {"conv_rows": 0}
+    c = wt.conveyor(20000, 0.003, lo, hi, poly)
     assert 0 < c["conv_rows"] <= wt.KMAX_ROWS and c["conv_dx"] > 0.006 and c["conv_dy"] > 0.006
 
 

@@ -27,6 +27,7 @@
 #pragma once
 #include <cmath>
 
+#include "corpuscle/core/real.h"
 #include "corpuscle/core/vec.h"
 #include "corpuscle/physics/polygon.h"
 
@@ -42,22 +43,34 @@ struct SpringDashpot {
 CPS_HD CPS_INLINE float effective_mass(float m1, float m2) { return m2 > 0.0f ? m1 * m2 / (m1 + m2) : m1; }
 
 // damping ratio zeta = c / (2 sqrt(k m_eff))
+template <class T>
+CPS_HD CPS_INLINE T damping_ratio(T k, T c, T m_eff) {
+  return c / (T(2) * tsqrt(k * m_eff));
+}
 CPS_HD CPS_INLINE float damping_ratio(const SpringDashpot& law, float m_eff) {
-  return law.c / (2.0f * fsqrt(law.k * m_eff));
+  return damping_ratio(law.k, law.c, m_eff);
 }
 
-// coefficient of normal restitution implied by k, c and the masses (0 when overdamped)
+// coefficient of normal restitution e = exp(-pi zeta / sqrt(1 - zeta^2)) implied by k, c and
+// the masses (0 when overdamped). T: float in the core, double for Python (core/real.h;
+// corpuscle._core.dem_restitution_for_damping)
+template <class T>
+CPS_HD CPS_INLINE T restitution_from_damping(T k, T c, T m_eff) {
+  T z = damping_ratio(k, c, m_eff);
+  if (!(z < T(1))) return T(0);
+  return texp(-pi_of<T>() * z / tsqrt(T(1) - z * z));
+}
 CPS_HD CPS_INLINE float restitution_from_damping(const SpringDashpot& law, float m_eff) {
-  float z = damping_ratio(law, m_eff);
-  if (!(z < 1.0f)) return 0.0f;
-  return fexp(-kPi * z / fsqrt(1.0f - z * z));
+  return restitution_from_damping(law.k, law.c, m_eff);
 }
 
-// the damping c that gives restitution e (0 < e <= 1) with stiffness k and these masses
-CPS_HD CPS_INLINE float damping_from_restitution(float k, float e, float m_eff) {
-  float le = flog(e);
-  float z = -le / fsqrt(kPi * kPi + le * le);
-  return 2.0f * z * fsqrt(k * m_eff);
+// the damping c that gives restitution e (0 < e <= 1) with stiffness k and these masses:
+// zeta = -ln e / sqrt(pi^2 + ln^2 e), c = 2 zeta sqrt(k m_eff) (_core.dem_damping_for_restitution)
+template <class T>
+CPS_HD CPS_INLINE T damping_from_restitution(T k, T e, T m_eff) {
+  T le = tlog(e);
+  T z = -le / tsqrt(pi_of<T>() * pi_of<T>() + le * le);
+  return T(2) * z * tsqrt(k * m_eff);
 }
 
 // contact duration t_c = pi / sqrt(k / m_eff - (c / (2 m_eff))^2); infinite when overdamped

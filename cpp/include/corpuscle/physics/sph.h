@@ -2,6 +2,7 @@
 // forces. Each visitor is called by a spatial query (for_each_neighbor) for one particle i.
 #pragma once
 #include "corpuscle/physics/sph_kernels.h"
+#include "corpuscle/physics/tait.h"
 
 namespace cps {
 
@@ -16,16 +17,15 @@ struct SphParams {
   float density_floor; // lower bound on density (kg/m^3)
 };
 
-// Tait equation (Monaghan 1994; Becker & Teschner 2007, eq. 7), negative pressure clamped to 0
+// Tait equation (physics/tait.h; Becker & Teschner 2007, eq. 7), negative pressure clamped to 0
 CPS_HD CPS_INLINE float tait_pressure(const SphParams& p, float rho) {
-  float r = rho / p.rest_density;
-  float pr = p.stiffness * (fpow(r, p.gamma) - 1.0f);
+  float pr = tait_pressure(rho, p.rest_density, p.stiffness, p.gamma);
   return pr > 0.0f ? pr : 0.0f;
 }
 
 // speed of sound of the Tait fluid at rest density: c0^2 = gamma B / rho0
 CPS_HD CPS_INLINE float tait_sound_speed(const SphParams& p) {
-  return fsqrt(p.gamma * p.stiffness / p.rest_density);
+  return tait_sound_speed(p.stiffness, p.rest_density, p.gamma);
 }
 
 // density: rho_i = m W(0) + sum_j m W(|x_ij|^2), fluid and ghost neighbours

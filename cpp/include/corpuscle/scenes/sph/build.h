@@ -39,7 +39,7 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   m.rho0 = p.f("rho0");
   m.c0 = p.f("c0");
   m.gamma = p.f("gamma");
-  m.B = m.c0 * m.c0 * m.rho0 / m.gamma;
+  m.B = tait_stiffness(m.c0, m.rho0, m.gamma);
   m.viscosity = int(p.integer("viscosity"));
   if (m.viscosity != kArtificialViscosity && m.viscosity != kLaminarViscosity)
     throw Error(std::string(kind) + ": viscosity must be 0 (artificial) or 1 (laminar)");

@@ -22,6 +22,7 @@
 #pragma once
 #include "corpuscle/physics/sph_kernel_families.h"
 #include "corpuscle/physics/sph_pair_terms.h"
+#include "corpuscle/physics/tait.h"
 #include "corpuscle/physics/timestep.h"
 #include "corpuscle/sim/table.h"
 #include "corpuscle/spatial/cell_grid.h"
@@ -82,10 +83,10 @@ struct Model {
   }
 };
 
-// Tait's equation of state (Batchelor 1967; Monaghan 1994): p = B ((rho / rho0)^gamma - 1)
+// Tait's equation of state (physics/tait.h): p = B ((rho / rho0)^gamma - 1)
 template <int D>
 CPS_HD CPS_INLINE float tait_pressure(const Model<D>& m, float rho) {
-  return m.B * (fpow(rho / m.rho0, m.gamma) - 1.0f);
+  return cps::tait_pressure(rho, m.rho0, m.B, m.gamma);
 }
 
 // per-step reductions over the particles (combined in a fixed order per backend)

@@ -1,0 +1,71 @@
+// The core's closed forms that Python needs a value of (the SPH box's hydrostatic start, the
+// wind tunnel's contact damping): the same template functions the core runs in float
+// (physics/tait.h, physics/dem.h), evaluated here in double for Python's float64 scene keys.
+// Each takes scalars (a float back) or, for its first argument, a 1-D float64 array (an array
+// back, the others broadcast).
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+
+#include <cstddef>
+
+#include "corpuscle/physics/dem.h"
+#include "corpuscle/physics/tait.h"
+
+namespace nb = nanobind;
+using namespace cps;
+
+namespace {
+
+using F64In = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using F64Out = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
+
+// f(x[i], args...) for each element of x, into a new NumPy array
+template <class F>
+F64Out map1(const F64In& x, F f) {
+  const size_t n = x.shape(0);
+  auto* out = new double[n];
+  const double* in = x.data();
+  for (size_t i = 0; i < n; ++i) out[i] = f(in[i]);
+  nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+  return F64Out(out, {n}, owner);
+}
+
+// a function of four doubles, bound for a scalar and for an array first argument
+template <class F>
+void def4(nb::module_& m, const char* name, F f, const char* a, const char* b, const char* c, const char* d,
+          const char* doc) {
+  m.def(name, [f](const F64In& x, double p, double q, double r) { return map1(x, [&](double v) { return f(v, p, q, r); }); },
+        nb::arg(a), nb::arg(b), nb::arg(c), nb::arg(d), doc);
+  m.def(name, [f](double x, double p, double q, double r) { return f(x, p, q, r); }, nb::arg(a), nb::arg(b),
+        nb::arg(c), nb::arg(d), doc);
+}
+
+template <class F>
+void def3(nb::module_& m, const char* name, F f, const char* a, const char* b, const char* c, const char* doc) {
+  m.def(name, [f](const F64In& x, double p, double q) { return map1(x, [&](double v) { return f(v, p, q); }); },
+        nb::arg(a), nb::arg(b), nb::arg(c), doc);
+  m.def(name, [f](double x, double p, double q) { return f(x, p, q); }, nb::arg(a), nb::arg(b), nb::arg(c), doc);
+}
+
+}  // namespace
+
+void bind_physics(nb::module_& m) {
+  // Tait's equation of state (physics/tait.h)
+  def4(m, "tait_pressure", [](double rho, double rho0, double B, double gamma) { return tait_pressure(rho, rho0, B, gamma); },
+       "rho", "rho0", "B", "gamma", "Tait's pressure B ((rho / rho0)^gamma - 1) (physics/tait.h, in double).");
+  def4(m, "tait_density", [](double p, double rho0, double B, double gamma) { return tait_density(p, rho0, B, gamma); },
+       "p", "rho0", "B", "gamma", "Tait's density at pressure p: rho0 (1 + p / B)^(1 / gamma) (physics/tait.h).");
+  def3(m, "tait_stiffness", [](double c0, double rho0, double gamma) { return tait_stiffness(c0, rho0, gamma); },
+       "c0", "rho0", "gamma", "Tait's B for sound speed c0: c0^2 rho0 / gamma (physics/tait.h).");
+  def3(m, "tait_sound_speed", [](double B, double rho0, double gamma) { return tait_sound_speed(B, rho0, gamma); },
+       "B", "rho0", "gamma", "The sound speed at rest density: sqrt(gamma B / rho0) (physics/tait.h).");
+  // the spring-dashpot contact law (physics/dem.h)
+  def3(m, "dem_restitution_for_damping",
+       [](double k, double c, double m_eff) { return restitution_from_damping(k, c, m_eff); }, "k", "c", "m_eff",
+       "Normal restitution of the spring-dashpot law with stiffness k, damping c and reduced mass m_eff "
+       "(0 when overdamped; physics/dem.h, in double).");
+  def3(m, "dem_damping_for_restitution",
+       [](double k, double e, double m_eff) { return damping_from_restitution(k, e, m_eff); }, "k", "e", "m_eff",
+       "The damping c that gives restitution e (0 < e <= 1) with stiffness k and reduced mass m_eff "
+       "(physics/dem.h, in double).");
+}

@@ -1,0 +1,88 @@
+"""The ``corpuscle`` command line.
+
+Each subcommand is a module of this package (``scenes``, ``info``, ``run``, ``view``,
+``bench``, ``validate``, ``polar``, ``render``, ``plot``, ``export``) that registers a
+:class:`Command` in the table :data:`COMMANDS` with :func:`register`; a new one is a module
+added to :data:`COMMAND_MODULES`. The options they share are in ``_options.py``. Bad input
+(scene errors, bad options, unusable backends, unwritable files) ends with exit code 2 and
+one line ``corpuscle: error: ...`` on stderr, never a traceback. Scenes are loaded and
+validated before the compiled core is imported, so those errors need no build.
+
+Exit codes: 0 success, 2 bad input, 3 run stopped by a health check, 4 the output could not
+be written (disk full ...; the frames written so far are kept), 130 interrupted, 141 stdout
+closed (broken pipe).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+from typing import Sequence
+
+from ..scene import SceneError
+from ._options import (BACKENDS, COMMANDS, EXIT_INTERRUPTED, EXIT_OK, EXIT_STOPPED, EXIT_USAGE, PROG, Command,
+                       Parser, UsageError, err, one_line, register)
+
+__all__ = ["main", "build_parser", "COMMANDS", "Command", "register", "UsageError", "PROG", "BACKENDS",
+           "EXIT_OK", "EXIT_USAGE", "EXIT_STOPPED", "EXIT_INTERRUPTED"]
+
+# the subcommands, in the order --help lists them (each module registers its command when
+# imported; render, plot and export import their heavy libraries only when they run)
+COMMAND_MODULES = ("scenes", "info", "run", "view", "bench", "validate", "polar", "render", "plot", "export")
+for _name in COMMAND_MODULES:
+    importlib.import_module(f"{__name__}.{_name}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered subcommand."""
+    from .. import __version__
+
+    parser = Parser(
+        prog=PROG, description="corpuscle: GPU particle simulator (SPH fluids, DEM, rigid bodies)"
+    )
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
+    for cmd in COMMANDS.values():
+        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description or cmd.help)
+        cmd.configure(p)
+        p.set_defaults(_handler=cmd.handler)
+    return parser
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions reported as one-line input errors (only from modules already loaded,
+    so this never imports the core)."""
+    errors: list[type[BaseException]] = [SceneError, UsageError, ValueError]
+    for module, name in (("corpuscle.io", "FrameStreamError"), ("corpuscle.simulation", "BackendError")):
+        cls = getattr(sys.modules.get(module), name, None)
+        if isinstance(cls, type) and issubclass(cls, BaseException):
+            errors.append(cls)
+    return tuple(errors)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)  # usage errors exit 2 here
+    args._argv = argv
+    try:
+        return int(args._handler(args) or 0)
+    except KeyboardInterrupt:
+        # Ctrl-C outside a run's loop (which reports its own): no traceback
+        err("interrupted")
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # stdout was closed early (`corpuscle bench ... | head`): stop quietly, as Unix tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
+    except Exception as exc:
+        # bad input: one line, exit 2; CORPUSCLE_DEBUG=1 shows the traceback
+        if not isinstance(exc, _user_errors()) or os.environ.get("CORPUSCLE_DEBUG"):
+            raise
+        err(f"error: {one_line(exc)}")
+        return int(getattr(exc, "exit_code", EXIT_USAGE))
+

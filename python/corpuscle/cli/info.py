@@ -1,0 +1,50 @@
+"""``corpuscle info``: the version, the build's options and the usable GPUs."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+from .. import _json
+from ._options import EXIT_OK, EXIT_USAGE, Command, err, one_line, register
+
+
+def _configure_info(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from .. import __version__
+
+    # the compiled core may be missing on a source checkout
+    try:
+        core = importlib.import_module("corpuscle._core")
+    except ImportError as exc:
+        err(f"error: the compiled core is not available ({one_line(exc)}); build it with `pip install .`")
+        return EXIT_USAGE
+    info = dict(core.build_info())
+    if args.json:
+        print(_json.dumps({"version": __version__, "build_info": info}))
+        return EXIT_OK
+    # text report
+    print(f"corpuscle {__version__}")
+    print(f"  core version       {info.get('version')}")
+    if info.get("cuda_compiled"):
+        print(f"  CUDA               compiled (architectures: {info.get('cuda_architectures') or '?'})")
+    else:
+        print("  CUDA               not compiled (CPU-only build)")
+    omp = f"yes, {info.get('omp_threads')} threads" if info.get("openmp") else "no"
+    print(f"  OpenMP             {omp}")
+    gpus = info.get("gpus") or []
+    for i, gpu in enumerate(gpus):
+        mem = gpu.get("memory_gib")
+        mem_text = f", {mem:.1f} GiB" if isinstance(mem, (int, float)) else ""
+        print(f"  GPU {i}              {gpu.get('name')} (compute {gpu.get('compute_capability')}{mem_text})")
+    if info.get("gpu_error"):
+        print(f"  GPU                none usable: {one_line(info['gpu_error'])}")
+    elif not gpus:
+        print("  GPU                none")
+    return EXIT_OK
+
+
+register(Command("info", "show the version, build options and usable GPUs", _configure_info, _cmd_info))
