@@ -9,6 +9,11 @@ scenes and the CLI's input checks work even where it is missing.
 
 __version__ = "0.1.0"
 
+from . import _omp
+
+# the OpenMP runtime's thread count and wait policy, set before the compiled core loads it
+_omp.configure()
+
 __all__ = ["Simulation", "Batch", "open", "load_scene", "__version__"]
 
 

@@ -13,7 +13,7 @@ import pytest
 pytest.importorskip("corpuscle._core")
 
 import corpuscle
-from corpuscle import _core
+from corpuscle import _core, _omp
 from corpuscle.cli import main
 
 BENCH = ["bench", "magic8ball", "--particles", "300", "--steps", "5", "--repeats", "2", "--warmup", "1",
@@ -110,7 +110,7 @@ def test_info_text(capsys):
     assert lines[0] == f"corpuscle {corpuscle.__version__}"
     assert row("core version") == info["version"]
     assert row("CUDA").startswith("compiled (architectures:" if info["cuda_compiled"] else "not compiled")
-    assert row("OpenMP") == (f"yes, {info['omp_threads']} threads" if info["openmp"] else "no")
+    assert row("OpenMP") == (f"yes, {_omp.describe(info['omp_threads'])}" if info["openmp"] else "no")
     gpu_lines = [ln.strip() for ln in lines if ln.strip().startswith("GPU ")]
     if info["gpus"]:
         assert len(gpu_lines) == len(info["gpus"]) + (1 if info["gpu_error"] else 0)

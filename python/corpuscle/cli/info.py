@@ -14,7 +14,7 @@ def _configure_info(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from .. import __version__
+    from .. import __version__, _omp
 
     # the compiled core may be missing on a source checkout
     try:
@@ -24,7 +24,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     info = dict(core.build_info())
     if args.json:
-        print(_json.dumps({"version": __version__, "build_info": info}))
+        print(_json.dumps({"version": __version__, "build_info": info, "openmp_policy": _omp.policy()}))
         return EXIT_OK
     # text report
     print(f"corpuscle {__version__}")
@@ -33,7 +33,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(f"  CUDA               compiled (architectures: {info.get('cuda_architectures') or '?'})")
     else:
         print("  CUDA               not compiled (CPU-only build)")
-    omp = f"yes, {info.get('omp_threads')} threads" if info.get("openmp") else "no"
+    omp = f"yes, {_omp.describe(info.get('omp_threads'))}" if info.get("openmp") else "no"
     print(f"  OpenMP             {omp}")
     gpus = info.get("gpus") or []
     for i, gpu in enumerate(gpus):
