@@ -47,12 +47,13 @@ inline Model<D> build_model(const ParamSource& p, const ArraySource* arrays) {
   m.pp = SpringDashpot{p.f("k"), p.f("c")};
   m.wall = SpringDashpot{p.f("k_wall"), p.f("c_wall")};
   m.wing = SpringDashpot{p.f("k_wing"), p.f("c_wing")};
+  m.periodic_z = D == 3 ? 1 : 0;  // the span
   m.lo = vecd<D>(p, "channel_lo", kind);
   m.hi = vecd<D>(p, "channel_hi", kind);
   if (!(m.hi[0] > m.lo[0]) || !(m.hi[1] - m.lo[1] > 2.0f * m.radius))
     throw Error(kind + ": the channel must be wider than a particle");
   // the periodic span: at least two contact reaches, so that a particle meets another at most
-  // once (directly or through one image) and never itself (stages.h, span_image)
+  // once (directly or through one image) and never itself (dem/model.h, span_image)
   if (D == 3 && !(m.hi[D - 1] - m.lo[D - 1] >= 4.0f * m.radius * (1.0f + 1e-4f)))
     throw Error(kind + ": the span (channel_hi[2] - channel_lo[2] = " + std::to_string(m.hi[D - 1] - m.lo[D - 1]) +
                 ") must be at least 4 particle radii (" + std::to_string(4.0f * m.radius) + ")");
