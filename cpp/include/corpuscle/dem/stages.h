@@ -36,6 +36,22 @@ struct NoExtraFields {
   CPS_HD void operator()(int, int) const {}
 };
 
+// a finalize hook for a kind with no per-scene bookkeeping of its own
+struct NoBookkeeping {
+  template <class Record>
+  CPS_HD void begin(Record&) const {}
+  template <class Sums>
+  CPS_HD bool sums_finite(const Sums&) const { return true; }
+  template <class Record, class Sums>
+  CPS_HD void taken(Record&, const Sums&, float) const {}
+};
+
+// an integrate hook that leaves the moved sphere as it is (walls act through forces only)
+struct FreeFlight {
+  template <int D>
+  CPS_HD void after(int, float, Vec<D>&, Vec<D>&) const {}
+};
+
 // stage 1: the current arrays gathered into the index's order (order: sorted slot -> input
 // slot; null: a plain copy, for a collisionless gas that needs no index)
 template <int D, class Extra = NoExtraFields>

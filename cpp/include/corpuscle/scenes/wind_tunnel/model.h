@@ -95,12 +95,6 @@ struct StepSums {
     return s;
   }
 };
-template <int D>
-struct SumsOp {
-  CPS_HD StepSums<D> operator()(const StepSums<D>& a, const StepSums<D>& b) const {
-    return StepSums<D>::combine(a, b);
-  }
-};
 
 using dem::kBadParticles;  // a particle position or velocity went non-finite
 using dem::kBadTraversal;  // an LBVH traversal stack would have overflowed
