@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/dem/build.h"
 #include "corpuscle/sim/params.h"
 #include "corpuscle/sim/sim_impl.h"
 #include "corpuscle/scenes/wind_tunnel/pipeline.h"
@@ -28,38 +29,22 @@ template <int D>
 inline Model<D> build_model(const ParamSource& p, const ArraySource* arrays) {
   const std::string kind = kind_name<D>();
   Model<D> m{};
-  m.n = int(p.integer("n"));
-  m.integrator = int(p.integer("integrator"));
-  if (m.integrator != kForwardEuler && m.integrator != kSymplecticEuler)
-    throw Error(kind + ": integrator must be 0 (forward Euler) or 1 (symplectic Euler)");
-  m.radius = p.f("radius");
-  m.cell = p.has("cell") ? p.f("cell") : 0.0f;
-  if (!(m.cell >= 0.0f) || !finite(m.cell)) throw Error(kind + ": cell must be finite and not negative");
-  m.lbvh_stack = p.has("lbvh_stack") ? int(p.integer("lbvh_stack")) : kLbvhStack;
-  if (m.lbvh_stack < 1 || m.lbvh_stack > kLbvhMaxStack)
-    throw Error(kind + ": lbvh_stack must be 1 to " + std::to_string(kLbvhMaxStack) + ", got " +
-                std::to_string(m.lbvh_stack));
-  m.mass = p.f("mass");
-  m.collide = p.has("collide") ? int(p.integer("collide") != 0) : 1;
-  m.reflexive = p.has("reflexive") ? int(p.integer("reflexive")) : 0;
-  if (m.reflexive < 0 || m.reflexive > 2) throw Error(kind + ": reflexive must be 0, 1 or 2");
+  dem::read_spheres<D>(p, kind, m);  // n, radius, mass, the pair law, contact form, integrator, index, dt
   m.recycle_scattered = p.has("recycle_scattered") ? int(p.integer("recycle_scattered") != 0) : 0;
-  m.pp = SpringDashpot{p.f("k"), p.f("c")};
   m.wall = SpringDashpot{p.f("k_wall"), p.f("c_wall")};
   m.wing = SpringDashpot{p.f("k_wing"), p.f("c_wing")};
+  m.periodic_z = D == 3 ? 1 : 0;  // the span
   m.lo = vecd<D>(p, "channel_lo", kind);
   m.hi = vecd<D>(p, "channel_hi", kind);
   if (!(m.hi[0] > m.lo[0]) || !(m.hi[1] - m.lo[1] > 2.0f * m.radius))
     throw Error(kind + ": the channel must be wider than a particle");
   // the periodic span: at least two contact reaches, so that a particle meets another at most
-  // once (directly or through one image) and never itself (stages.h, span_image)
+  // once (directly or through one image) and never itself (dem/model.h, span_image)
   if (D == 3 && !(m.hi[D - 1] - m.lo[D - 1] >= 4.0f * m.radius * (1.0f + 1e-4f)))
     throw Error(kind + ": the span (channel_hi[2] - channel_lo[2] = " + std::to_string(m.hi[D - 1] - m.lo[D - 1]) +
                 ") must be at least 4 particle radii (" + std::to_string(4.0f * m.radius) + ")");
   m.speed = p.f("speed");
   m.thermal = p.f("thermal");
-  m.dt_fraction = p.f("dt_fraction");
-  m.dt_max = p.f("dt_max");
   m.quarter_chord = vecd<2>(p, "quarter_chord", kind);
   m.measure_start = p.number("measure_start");
   m.block_time = p.number("block_time");

@@ -14,6 +14,7 @@
 // Model (constant), Scene (the per-scene record: clock, diagnostics, the block averages),
 // Control (the input of the next step) and Arrays (structure of arrays) are plain data.
 #pragma once
+#include "corpuscle/dem/model.h"
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/polygon.h"
 #include "corpuscle/physics/polygon_grid.h"
@@ -26,34 +27,24 @@ constexpr int kMaxEdges = 1024;  // airfoil polygon capacity (edges): e398 has 6
 constexpr int kMaxBlocks = 64;   // block averages of the forces kept in the record
 constexpr int kMaxRows = 16384;  // inflow conveyor rows (the cold beam's lattice rows)
 
-constexpr int kForwardEuler = 0;     // x += v dt, v += a dt (the seed's)
-constexpr int kSymplecticEuler = 1;  // v += a dt, x += v dt
+using dem::kForwardEuler;     // x += v dt, v += a dt (the seed's)
+using dem::kSymplecticEuler;  // v += a dt, x += v dt
 
-// constant per-scene parameters
+// constant per-scene parameters: the soft spheres' (dem/model.h: n, radius, mass, the
+// pair law, the contact form, the integrator, the channel as the index's domain lo/hi, the
+// grid cell, the tree's stack, the dt rule; D = 3: z periodic) and the tunnel's own
 template <int D>
-struct Model {
+struct Model : dem::SoftSpheres<D> {
   static_assert(D == 2 || D == 3, "the wind tunnel is 2-D or 3-D");
-  int n;                 // particles
-  int integrator;        // kForwardEuler / kSymplecticEuler
-  float radius, mass;
-  int collide;           // particle-particle contacts on (1) or off (0: a collisionless gas)
-  int reflexive;         // 0: gather (each particle sums its own contacts: reproducible);
-                         // 1: reflexive (each pair once, the reaction added by atomics);
-                         // 2: reflexive with warp-aggregated atomics on the device
+  // (lo, hi: the channel: inflow x = lo[0], outflow x = hi[0], walls y = lo[1], hi[1];
+  // D = 3: the periodic span z in [lo[2], hi[2]))
   int recycle_scattered; // 1: a particle that touched the airfoil re-enters at the inflow when it
                          // reaches a wall (walls send no scattered particle back: free-molecular
                          // validation); 0: walls reflect every particle
-  SpringDashpot pp;      // particle-particle
   SpringDashpot wall;    // particle-wall (top and bottom)
   SpringDashpot wing;    // particle-airfoil
-  Vec<D> lo, hi;         // the channel: inflow x = lo[0], outflow x = hi[0], walls y = lo[1], hi[1];
-                         // D = 3: the periodic span z in [lo[2], hi[2])
   float speed;           // free-stream speed U (along +x)
   float thermal;         // per-component thermal velocity spread / U (0: the seed's cold beam)
-  float cell;            // the broad-phase grid's cell edge (m), at least a contact diameter
-  int lbvh_stack;        // LBVH traversal stack entries per thread (shared memory on the device)
-  float dt_fraction;     // the fastest particle moves at most this fraction of the radius per step
-  float dt_max;
   Vec2 quarter_chord;    // moment reference point (in x-y; D = 3: the quarter-chord line along z)
   double measure_start;  // s: forces are averaged from here on (the steady part)
   double block_time;     // s: initial length of an averaging block (doubled when all are full)
@@ -104,15 +95,9 @@ struct StepSums {
     return s;
   }
 };
-template <int D>
-struct SumsOp {
-  CPS_HD StepSums<D> operator()(const StepSums<D>& a, const StepSums<D>& b) const {
-    return StepSums<D>::combine(a, b);
-  }
-};
 
-constexpr int kBadParticles = 1;  // a particle position or velocity went non-finite
-constexpr int kBadTraversal = 2;  // an LBVH traversal stack would have overflowed
+using dem::kBadParticles;  // a particle position or velocity went non-finite
+using dem::kBadTraversal;  // an LBVH traversal stack would have overflowed
 
 // the input of the next step
 struct Control {
@@ -144,16 +129,12 @@ struct Scene {
   int n_leaving;
 };
 
-// structure of arrays; particles sorted by cell every step
+// structure of arrays; particles sorted by cell every step: the spheres' (dem/model.h:
+// positions, velocities, ids, their other buffers, number density, force, pressure, contacts)
+// and the tunnel's
 template <int D>
-struct Arrays {
-  Vec<D> *pos, *vel, *pos_alt, *vel_alt;
-  int *id, *id_alt;
+struct Arrays : dem::Arrays<D> {
   int *scattered, *scattered_alt;  // 1: touched the airfoil since it (re-)entered
-  float* number_density;           // particles per unit area (D = 3: volume) around each (grid cell block)
-  Vec<D>* force;      // contact force on each particle (this step)
-  float* pressure;   // sum of contact-force magnitudes (the seed's "pressure")
-  int* contacts;     // overlapping neighbours, walls and airfoil
   StepSums<D>* items;
   int* leaving;      // this step's leaving particles (slots; -1 once placed on the conveyor)
 };

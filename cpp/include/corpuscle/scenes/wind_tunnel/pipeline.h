@@ -1,13 +1,16 @@
 // The wind tunnel pipeline: its buffers, the order of its stages for one step, the views.
 // SimImpl (sim/sim_impl.h) owns the Exec, the per-scene record and the control.
 //
-// A step: the D-dimensional cell grid keys the current positions and sorts them (CellGrid<D, Exec>),
-// the particle arrays are gathered into cell order in the other buffers, the cell ranges
-// marked; then the contact forces by gather with the reductions and the per-scene finalize
-// (dt, block averages, clock) fused into the same pass (the LBVH's walks: reduced after), and
-// the integration (with recycling and the inflow conveyor) in place. The sorted
-// buffers are current afterwards. Index plug-ins: the grid, the LBVH and all pairs. D = 2 is
-// `wind-tunnel`, D = 3 `wind-tunnel-3d` (model.h).
+// A step is the DEM module's (dem/step.h) with the tunnel's hooks (stages.h): the index (the
+// D-dimensional cell grid, CellGrid<D, Exec>, or the LBVH) keys the current positions and sorts
+// them, the particle arrays are gathered into its order in the other buffers (the airfoil flag
+// too: ReorderScattered), the cell ranges marked (the tree built); then the contact forces by
+// gather, the walls and the airfoil (Boundary), with the reductions and the per-scene finalize
+// (dt; block averages and the conveyor's phase: Finalize; clock) fused into the same pass (the
+// LBVH's walks: reduced after), and the integration (recycling and keeping out of the airfoil:
+// Outflow) in place, then the inflow conveyor. The sorted buffers are current afterwards.
+// Index plug-ins: the grid, the LBVH and all pairs. D = 2 is `wind-tunnel`, D = 3
+// `wind-tunnel-3d` (model.h).
 #pragma once
 #include <cmath>
 #include <string>
@@ -15,25 +18,16 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/dem/step.h"
 #include "corpuscle/scenes/wind_tunnel/stages.h"
 #include "corpuscle/scenes/wind_tunnel/tables.h"
 
 namespace cps::wt {
 
-struct GridIndex {
-  static constexpr const char* name = "grid";
-  static constexpr bool kGrid = true;
-};
-// every particle against every other (O(N^2)): the reference the grid is tested against
-struct AllPairsIndex {
-  static constexpr const char* name = "allpairs";
-  static constexpr bool kGrid = false;
-};
-// the seed's Karras LBVH over Morton codes (spatial/lbvh.h), gather form
-struct LbvhIndex {
-  static constexpr const char* name = "lbvh";
-  static constexpr bool kGrid = false;
-};
+// the index plug-ins: the DEM module's (dem/step.h)
+using dem::AllPairsIndex;
+using dem::GridIndex;
+using dem::LbvhIndex;
 
 // the kind's name of each dimension
 template <int D>
@@ -61,10 +55,8 @@ class Pipeline {
     return names[s];
   }
 
-  // cells of at least one contact diameter (larger cells: fewer of them, more candidates each)
-  static CellGridSpec<D> grid_spec(const Model& m) {
-    return make_cell_grid<D>(m.lo, m.hi, std::fmax(2.0f * m.radius, m.cell));
-  }
+  // cells of at least one contact diameter (dem::grid_spec)
+  static CellGridSpec<D> grid_spec(const Model& m) { return dem::grid_spec<D>(m); }
 
   static double bytes_needed(const Model& m) {
     const double n = m.n;
@@ -77,7 +69,7 @@ class Pipeline {
   CPS_KIND_TABLES(CPS_WT_FIELDS, CPS_WT_SCALARS, CPS_WT_CONTROLS, Scene, Control)
 
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u)
-      : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)), tree_(m.lo, m.hi, 2.0f * m.radius * (1.0f + 1e-6f)) {
+      : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)), tree_(m.lo, m.hi, dem::tree_reach<D>(m)) {
     const int n = m.n;
     if (n <= 0) throw Error(std::string(kind) + ": no particles");
     if (m_.n_edges > 0) {
@@ -140,73 +132,20 @@ class Pipeline {
     const int cur = parity_, nxt = parity_ ^ 1;
     Model* md = model_.data();
     Scene* g = g_;
-    // 1. key and sort the current positions, gather the arrays into cell order, mark cells
-    // (a collisionless gas needs no index: the arrays are copied as they are)
-    // (the all-pairs reference needs no order either)
-    constexpr bool kTree = std::is_same_v<Index, LbvhIndex>;
-    // stages timed: 0 keys and sort, 1 reorder, 2 build (cell ranges / the tree's nodes and boxes)
-    if (m_.collide && kTree) {
-      tree_.sort(ex_, pos_[cur].data(), n);
-      ex_.mark(0);
-      ex_.for_each(n, ReorderStage<D>{tree_.order(), arrays(cur, nxt)});
-      ex_.mark(1);
-      tree_.build(ex_, pos_[nxt].data());
-    } else if (m_.collide && Index::kGrid) {
-      grid_.sort(ex_, pos_[cur].data(), nullptr, n);
-      ex_.mark(0);
-      ex_.for_each(n, ReorderStage<D>{grid_.order(), arrays(cur, nxt)});
-      ex_.mark(1);
-      grid_.mark(ex_);
-    } else {
-      ex_.mark(0);
-      ex_.for_each(n, ReorderStage<D>{nullptr, arrays(cur, nxt)});
-      ex_.mark(1);
-    }
-    ex_.mark(2);
+    // 1. key and sort the current positions, gather the arrays into the index's order (the
+    // airfoil flag with them), build the index (the DEM module's; stages timed 0, 1, 2)
+    const Arrays a = arrays(cur, nxt);
+    dem::sort_and_reorder<Index>(ex_, m_, grid_, tree_, a, ReorderScattered{a.scattered, a.scattered_alt});
     Arrays s = arrays(nxt, cur);
-    // 2. contacts by gather (or, reflexive, each pair once with atomics, then the rest), and
-    // 3. the step's sums with the per-scene update (dt, block averages, clock): fused into the
-    // contact pass (Exec::for_each_reduce_then) but for the tree, whose walks need shared memory
-    auto contacts = [&](const auto& view) {
-      using V = std::decay_t<decltype(view)>;
-      // the tree's walks keep their stacks in shared memory on the device (spatial/lbvh.h)
-      auto walking = [&](const auto& f) {
-        if constexpr (kTree) ex_.for_each_shared(n, f, lbvh_stack_bytes(m_.lbvh_stack));
-        else ex_.for_each(n, f);
-      };
-      if (m_.collide && m_.reflexive) {
-        ex_.for_each(n, ZeroContactsStage<D>{s});
-        walking(PairStage<D, V>{md, g, s, view});
-      }
-      const ForceStage<D, V> force{md, g, u_, s, view, grid_.spec()};
-      if constexpr (kTree) {
-        walking(force);
-        ex_.mark(3);
-        if (integrate) ex_.reduce_then(s.items, n, &g->pending, SumsOp<D>{}, StepSums::identity(), FinalizeStage<D>{md, g, u_});
-        else ex_.reduce(s.items, n, &g->sums, SumsOp<D>{}, StepSums::identity());
-      } else {
-        // the forces and the step's sums in one pass: the sums items are never stored
-        if (integrate)
-          ex_.for_each_reduce_then(n, EvalOf<ForceStage<D, V>>{force}, &g->pending, SumsOp<D>{}, StepSums::identity(),
-                                   FinalizeStage<D>{md, g, u_});
-        else
-          ex_.for_each_reduce_then(n, EvalOf<ForceStage<D, V>>{force}, &g->sums, SumsOp<D>{}, StepSums::identity(),
-                                   NoFinalize{});
-        ex_.mark(3);
-      }
-      ex_.mark(4);
-    };
-    if constexpr (Index::kGrid) {
-      contacts(grid_.view(s.pos).with_radius(2.0f * m_.radius));  // the contact reach, whatever the cell
-    } else if constexpr (kTree) {
-      contacts(tree_.view(s.pos, &g->clock.bad, kBadTraversal, m_.lbvh_stack));
-    } else {
-      const float reach = 2.0f * m_.radius;
-      contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});
-    }
+    // 2. contacts (gather or reflexive), walls and airfoil (the Boundary hook), and 3. the
+    // step's sums with the per-scene update (dt, block averages, clock: the Finalize hook)
+    // (stages timed 3, 4)
+    dem::contacts_and_sums<Index>(ex_, m_, md, g, s, s.items, grid_, tree_, Boundary<D>{md, u_, s.scattered},
+                                  Finalize<D>{md, u_}, integrate);
     if (integrate) {
-      // 4. integrate in place (the sorted buffers become the current ones)
-      ex_.for_each(n, IntegrateStage<D>{md, g, u_, s});
+      // 4. integrate in place (the sorted buffers become the current ones), recycling at the
+      // outflow and keeping out of the airfoil (the Outflow hook)
+      ex_.for_each(n, dem::IntegrateStage<D, Scene, Outflow<D>>{md, g, s, Outflow<D>{md, g, u_, s}});
       // the cold beam's leaving particles onto the inflow conveyor's free slots
       // (one launch: the passes are separated by the block's barrier)
       if (m_.conv_rows > 0) ex_.template for_each_tile<kConveyorThreads>(1, ConveyorStage<D>{md, g, u_, s});

@@ -1,24 +1,21 @@
-// The wind tunnel's stages: functors over the particles (lanes of width 1: for_each) or one
-// item per scene. Nothing here knows which backend runs it. Every stage is a template on the
-// dimension D (model.h): the x-y plane holds the channel's walls and the airfoil section; D = 3
-// adds the periodic span z (contacts across it through periodic images, span_image).
+// The wind tunnel's own stages and hooks: the random numbers of re-entry, the Maxwellian
+// inflow, the airfoil (its frame under the pitch control, its contact and push-out), the
+// channel's walls, the block averages of the airfoil's force, the inflow conveyor, and the
+// hooks through which the DEM module's generic stages (dem/stages.h: reorder, contacts by
+// gather or pairs, number density, dt, integration) see this kind. Nothing here knows which
+// backend runs it. Every function is a template on the dimension D (model.h): the x-y plane
+// holds the channel's walls and the airfoil section; D = 3 adds the periodic span z (the DEM
+// module's periodic_z: contacts across it through periodic images, dem::span_image).
 #pragma once
 #include "corpuscle/core/atomics.h"
+#include "corpuscle/dem/stages.h"
 #include "corpuscle/scenes/wind_tunnel/model.h"
-#include "corpuscle/spatial/allpairs.h"
-#include "corpuscle/spatial/lbvh.h"
 
 namespace cps::wt {
 
-
-CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
-#ifdef __CUDA_ARCH__
-  atomicAdd(reinterpret_cast<unsigned long long*>(p), static_cast<unsigned long long>(v));
-#else
-  __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
-#endif
-}
-
+using dem::add_count;
+using dem::choose_dt;
+using dem::wrap_span;
 
 // counter-based random numbers: a pure function of (seed, particle id, step, stream), so
 // every backend and thread count draws the same ones (lowbias32, C. Wellons 2018)
@@ -75,15 +72,6 @@ CPS_HD CPS_INLINE float flux_weighted_speed_ratio(float s, unsigned seed, int id
   return s + w;
 }
 
-// the fastest particle moves at most dt_fraction radii per step, and dt <= dt_max
-template <int D>
-CPS_HD CPS_INLINE float choose_dt(const Model<D>& m, float vmax2) {
-  float v = fsqrt(vmax2);
-  float dt = m.dt_max;
-  if (v > 0.0f) dt = fmin2(dt, m.dt_fraction * m.radius / v);
-  return dt;
-}
-
 // the x-y components of a vector (the plane of the airfoil section), and a vector with its
 // x-y components replaced (z kept); for D = 2 both are the vector itself
 template <int D>
@@ -105,80 +93,6 @@ CPS_HD CPS_INLINE Vec<D> from_xy(const Vec2& b) {
   if constexpr (D == 2) return b;
   else return Vec<D>{{b[0], b[1], 0.0f}};
 }
-
-// D = 3, the periodic span: the shift (+L or -L, L the span; 0: none) that takes z to its
-// image beyond the other end of the span when z lies within `reach` of this end; the pairs a
-// particle has with particles near the other end are found by a second search of the index
-// around x + shift e_z (a span of at least two reaches, which build.h asks for, has at most one
-// such image and never the particle itself or a particle found directly)
-template <int D>
-CPS_HD CPS_INLINE float span_image(const Model<D>& m, float z, float reach) {
-  if constexpr (D == 2) {
-    return 0.0f;
-  } else {
-    const float L = m.hi[2] - m.lo[2];
-    return z - m.lo[2] < reach ? L : (m.hi[2] - z < reach ? -L : 0.0f);
-  }
-}
-// the displacement x_j - (x_i + shift e_z), as (x_j - x_i) - shift in z: the two particles of a
-// pair meeting through the periodic boundary see exactly opposite displacements
-template <int D>
-CPS_HD CPS_INLINE Vec<D> image_displacement(const Vec<D>& xi, const Vec<D>& xj, float shift) {
-  Vec<D> d = xj - xi;
-  if constexpr (D == 3) d[2] = d[2] - shift;
-  return d;
-}
-// the index view searched around an image point: its reach widened by a rounding margin (the
-// pair law decides on the exact displacement, image_displacement, so the search must not miss
-// a pair that the law sees touching)
-template <int D>
-CPS_HD CPS_INLINE CellGridView<D> widened(const CellGridView<D>& v, float reach) {
-  return v.with_radius(reach);
-}
-template <int D>
-CPS_HD CPS_INLINE AllPairsView<D> widened(const AllPairsView<D>& v, float reach) {
-  return v.with_radius(reach);
-}
-template <int D>
-CPS_HD CPS_INLINE LbvhView<D> widened(const LbvhView<D>& v, float reach) {
-  LbvhView<D> w = v;
-  w.radius = reach > v.radius ? reach : v.radius;
-  return w;
-}
-// the search reach around an image point: a contact diameter and a rounding margin
-template <int D>
-CPS_HD CPS_INLINE float image_reach(const Model<D>& m) { return 2.0f * m.radius * (1.0f + 1e-5f); }
-
-// D = 3: z taken back into the span [lo, hi) (a particle may cross it more than once a step
-// when the span is a few radii)
-template <int D>
-CPS_HD CPS_INLINE void wrap_span(const Model<D>& m, Vec<D>& x) {
-  if constexpr (D == 3) {
-    const float L = m.hi[2] - m.lo[2];
-    const float t = (x[2] - m.lo[2]) / L;
-    if (t < 0.0f || t >= 1.0f) {
-      x[2] -= L * ffloor(t);
-      if (!(x[2] < m.hi[2]) || !(x[2] >= m.lo[2])) x[2] = m.lo[2];  // rounding at the ends
-    }
-  }
-  (void)m;
-  (void)x;
-}
-
-// stage 1: the current arrays gathered into cell order (order: sorted slot -> input slot;
-// null: a plain copy, for a collisionless gas that needs no index)
-template <int D>
-struct ReorderStage {
-  const int* order;
-  Arrays<D> a;
-  CPS_HD void operator()(int j) const {
-    int o = order ? order[j] : j;
-    a.pos_alt[j] = a.pos[o];
-    a.vel_alt[j] = a.vel[o];
-    a.id_alt[j] = a.id[o];
-    a.scattered_alt[j] = a.scattered[o];
-  }
-};
 
 // the airfoil as the control pitches it: the built polygon turned nose up by u.pitch degrees
 // about the quarter chord (clockwise for a flow along +x, as airfoils.place turns it). The
@@ -253,296 +167,6 @@ CPS_HD CPS_INLINE Vec<D> boundary_forces(const Model<D>& m, const AirfoilFrame& 
   return F;
 }
 
-// the number density around x: the particles in the 3^D cells of `spec` around x's cell,
-// itself excluded, over the block's area (D = 3: volume; cells inside the grid: at the ends
-// of the periodic span the block is cut there, an unbiased estimate all the same); from the
-// cell ranges on the grid, by testing every particle's cell with the all-pairs index (the
-// same count)
-template <int D>
-CPS_HD CPS_INLINE float block_measure(const CellGridSpec<D>& spec, int cells) {
-  float a = float(cells) * spec.cell * spec.cell;
-  if constexpr (D == 3) a *= spec.cell;
-  return a;
-}
-// is cell cj one of the 3^D around c?
-template <int D>
-CPS_HD CPS_INLINE bool in_block(const int* c, const int* cj) {
-  bool in = true;
-  for (int k = 0; k < D; ++k) in = in && cj[k] - c[k] >= -1 && cj[k] - c[k] <= 1;
-  return in;
-}
-// how many of the 3^D cells around c lie inside the grid
-template <int D>
-CPS_HD CPS_INLINE int block_cells(const CellGridSpec<D>& spec, const int* c) {
-  int cells = 1;
-  for (int k = 0; k < D; ++k) {
-    int along = 0;
-    for (int q = c[k] - 1; q <= c[k] + 1; ++q) along += (q >= 0 && q < spec.dims[k]) ? 1 : 0;
-    cells *= along;
-  }
-  return cells;
-}
-template <int D>
-CPS_HD CPS_INLINE float block_density(const CellGridView<D>& grid, const CellGridSpec<D>&, const Vec<D>& x) {
-  int count, cells;
-  grid.block_count(x, count, cells);
-  return float(count - 1) / block_measure(grid.spec, cells);
-}
-template <int D>
-CPS_HD CPS_INLINE float block_density(const AllPairsView<D>& all, const CellGridSpec<D>& spec, const Vec<D>& x) {
-  int c[D], cj[D];
-  spec.cell_of(x, c);
-  int count = 0;
-  for (int j = 0; j < all.n; ++j) {
-    spec.cell_of(all.pos[j], cj);
-    count += in_block<D>(c, cj) ? 1 : 0;
-  }
-  return float(count - 1) / block_measure(spec, block_cells(spec, c));
-}
-
-// the tree: one box query of the 3^D cells (a little wider), each slot found counted when its
-// cell is in the block. With a visitor (the contact gather), the same walk also visits every
-// slot of the contact reach: the query box is the union of the block's and the reach's (the
-// block holds the reach unless x lies outside the grid), a slot is a contact candidate when
-// it lies in the reach's box (as in gather), and the walk meets those slots in the order
-// gather would (the tree's order does not depend on the box): one walk instead of two, the
-// same contacts summed in the same order
-template <int D, class Visit>
-CPS_HD CPS_INLINE float tree_block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec<D>& x,
-                                           Visit* contact) {
-  int c[D], cj[D];
-  spec.cell_of(x, c);
-  float qlo[D], qhi[D], rlo[D], rhi[D];
-  for (int k = 0; k < D; ++k) {
-    qlo[k] = spec.origin[k] + float(c[k] - 1) * spec.cell - 1e-3f * spec.cell;
-    qhi[k] = spec.origin[k] + float(c[k] + 2) * spec.cell + 1e-3f * spec.cell;
-    rlo[k] = x[k] - tree.radius;
-    rhi[k] = x[k] + tree.radius;
-    if (contact) {
-      qlo[k] = fmin2(qlo[k], rlo[k]);
-      qhi[k] = fmax2(qhi[k], rhi[k]);
-    }
-  }
-  const float r2 = tree.radius * tree.radius;
-  int count = 0;
-  tree.query_box(qlo, qhi, [&](int j) {
-    const Vec<D> pj = tree.pos[j];
-    if (contact) {
-      bool in = true;
-      for (int k = 0; k < D; ++k) in = in && pj[k] >= rlo[k] && pj[k] <= rhi[k];
-      if (in) {
-        const Vec<D> d = x - pj;
-        const float rr = norm2(d);
-        if (rr < r2) (*contact)(j, d, rr);
-      }
-    }
-    spec.cell_of(pj, cj);
-    count += in_block<D>(c, cj) ? 1 : 0;
-  });
-  return float(count - 1) / block_measure(spec, block_cells(spec, c));
-}
-template <int D>
-struct NoContactVisit {
-  CPS_HD void operator()(int, const Vec<D>&, float) const {}
-};
-template <int D>
-CPS_HD CPS_INLINE float block_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, const Vec<D>& x) {
-  return tree_block_density(tree, spec, x, static_cast<NoContactVisit<D>*>(nullptr));
-}
-
-// the contacts by gather (visit(j, x - x_j, r2) for every slot of the contact reach, i
-// included) and the number density around x: the index's gather, then its block count; the
-// tree does both in one walk (tree_block_density)
-template <int D, class View, class Visit>
-CPS_HD CPS_INLINE float gather_and_density(const View& view, const CellGridSpec<D>& spec, int i, const Vec<D>& x,
-                                           Visit& visit) {
-  view.gather(i, x, visit);
-  return block_density(view, spec, x);
-}
-template <int D, class Visit>
-CPS_HD CPS_INLINE float gather_and_density(const LbvhView<D>& tree, const CellGridSpec<D>& spec, int, const Vec<D>& x,
-                                           Visit& visit) {
-  return tree_block_density(tree, spec, x, &visit);
-}
-
-// the reflexive form, stage 2a: the per-particle contact sums zeroed
-template <int D>
-struct ZeroContactsStage {
-  Arrays<D> s;
-  CPS_HD void operator()(int i) const {
-    s.force[i] = Vec<D>::zero();
-    s.pressure[i] = 0.0f;
-    s.contacts[i] = 0;
-  }
-};
-
-// the reaction f, its magnitude and one contact added to particle j. Warp-aggregated
-// (the seed's option, on the device): the lanes of a warp adding to the same j at this moment
-// (__match_any_sync over j) sum their values by shuffles and one of them adds the sum, so a
-// particle hit by several lanes takes one atomic per component instead of one per lane. On the
-// CPU, and with aggregate off, one atomic each.
-template <int D>
-CPS_HD CPS_INLINE void add_reaction(const Arrays<D>& s, int j, const Vec<D>& f, float mag, bool aggregate) {
-#ifdef __CUDA_ARCH__
-  if (aggregate) {
-    const unsigned active = __activemask();
-    const unsigned peers = __match_any_sync(active, j);
-    const int lane = int(threadIdx.x & 31u);
-    float sf[D], sm = 0.0f;
-    for (int k = 0; k < D; ++k) sf[k] = 0.0f;
-    unsigned rest = peers;
-    while (rest) {  // every peer runs the same loop: the shuffles see the whole group
-      const int src = __ffs(int(rest)) - 1;
-      rest &= rest - 1u;
-      for (int k = 0; k < D; ++k) sf[k] += __shfl_sync(peers, f[k], src);
-      sm += __shfl_sync(peers, mag, src);
-    }
-    if (lane == __ffs(int(peers)) - 1) {
-      for (int k = 0; k < D; ++k) atomicAdd(&s.force[j][k], sf[k]);
-      atomicAdd(&s.pressure[j], sm);
-      atomicAdd(&s.contacts[j], __popc(peers));
-    }
-    return;
-  }
-#endif
-  (void)aggregate;
-  for (int k = 0; k < D; ++k) atomic_add(&s.force[j][k], f[k]);
-  atomic_add(&s.pressure[j], mag);
-  atomic_add(&s.contacts[j], 1);
-}
-
-// stage 2b: each overlapping pair once, from its lower slot (view.pairs); the force on i is
-// summed locally, the reaction on j and i's sum added with atomics (float atomics: the sums'
-// order, and so their last bits, vary from run to run on parallel backends)
-// (D = 3: and the pairs through the periodic span, from the lower slot as well)
-template <int D, class View>
-struct PairStage {
-  const Model<D>* model;
-  const Scene<D>* g;
-  Arrays<D> s;
-  View view;
-  CPS_HD void operator()(int i) const {
-    if (halted(g)) return;
-    const Model<D>& m = *model;
-    const Vec<D> x = s.pos[i], v = s.vel[i];
-    const float r = m.radius;
-    Vec<D> F = Vec<D>::zero();
-    float pressure = 0.0f;
-    int contacts = 0;
-    // the pair (i, j), j's displacement seen from i's image x + shift e_z (shift 0: x itself)
-    auto touch = [&](int j, float shift) {
-      Vec<D> f;
-      float mag;
-      if (pair_contact_force_d<D>(m.pp, image_displacement(x, s.pos[j], shift), v, r, s.vel[j], r, f, mag)) {
-        F += f;
-        pressure += mag;
-        contacts += 1;
-        add_reaction(s, j, -f, mag, m.reflexive == 2);
-      }
-    };
-    view.pairs(i, x, [&](int j, const Vec<D>&, float) { touch(j, 0.0f); });
-    if constexpr (D == 3) {
-      const float shift = span_image(m, x[2], image_reach(m));
-      if (shift != 0.0f) {
-        Vec<D> xq = x;
-        xq[2] += shift;
-        widened(view, image_reach(m)).pairs(i, xq, [&](int j, const Vec<D>&, float) { touch(j, shift); });
-      }
-    }
-    if (contacts > 0) {
-      for (int k = 0; k < D; ++k) atomic_add(&s.force[i][k], F[k]);
-      atomic_add(&s.pressure[i], pressure);
-      atomic_add(&s.contacts[i], contacts);
-    }
-  }
-};
-
-// stage 2: contact forces by gather over the index (the cell grid, or every particle for
-// the all-pairs reference; each particle sums its own: no atomics, the same sum in the same
-// order on every backend), walls, airfoil; the per-particle items of the step's reductions
-// (D = 3: and the contacts through the periodic span)
-template <int D, class View>
-struct ForceStage {
-  const Model<D>* model;
-  const Scene<D>* g;
-  const Control* ctl;
-  Arrays<D> s;
-  View grid;
-  CellGridSpec<D> spec;  // the cells the number density counts in
-  // the stage storing its sums item (the reduction reads it after)
-  CPS_HD void operator()(int i) const { s.items[i] = eval(i); }
-  // the stage, returning its sums item (Exec::for_each_reduce_then: never stored)
-  CPS_HD StepSums<D> eval(int i) const {
-    if (halted(g)) return StepSums<D>::identity();  // the reduction of a step not taken is discarded
-    const Model<D>& m = *model;
-    const Vec<D> x = s.pos[i], v = s.vel[i];
-    Vec<D> F = Vec<D>::zero();
-    float pressure = 0.0f;
-    int contacts = 0;
-    const Vec<D>* pos = s.pos;
-    const Vec<D>* vel = s.vel;
-    const float r = m.radius;
-    const SpringDashpot law = m.pp;
-    float density = 0.0f;
-    // the pair (i, j), j's displacement seen from i's image x + shift e_z (shift 0: x itself)
-    auto touch = [&](int j, float shift) {
-      Vec<D> f;
-      float mag;
-      if (pair_contact_force_d<D>(law, image_displacement(x, pos[j], shift), v, r, vel[j], r, f, mag)) {
-        F += f;
-        pressure += mag;
-        contacts += 1;
-      }
-    };
-    if (m.collide && m.reflexive) {
-      // the pairs were summed by PairStage
-      F = s.force[i];
-      pressure = s.pressure[i];
-      contacts = s.contacts[i];
-      density = block_density(grid, spec, x);
-    } else if (m.collide) {
-      // the gather and the number density (one walk of the tree for both)
-      auto pair = [&](int j, const Vec<D>&, float) {
-        if (j == i) return;
-        touch(j, 0.0f);
-      };
-      density = gather_and_density(grid, spec, i, x, pair);
-      if constexpr (D == 3) {
-        const float shift = span_image(m, x[2], image_reach(m));
-        if (shift != 0.0f) {
-          Vec<D> xq = x;
-          xq[2] += shift;
-          widened(grid, image_reach(m)).gather(i, xq, [&](int j, const Vec<D>&, float) { touch(j, shift); });
-        }
-      }
-    }
-    StepSums<D> it = StepSums<D>::identity();
-    int scattered = s.scattered[i];
-    F += boundary_forces(m, airfoil_frame(m, *ctl), x, v, pressure, contacts, it, scattered);
-    s.scattered[i] = scattered;
-    s.number_density[i] = density;
-    it.total_force = F;
-    it.vmax2 = norm2(v);
-    it.ke = 0.5f * m.mass * it.vmax2;
-    s.force[i] = F;
-    s.pressure[i] = pressure;
-    s.contacts[i] = contacts;
-    return it;
-  }
-};
-
-// ForceStage as the item function of a fused reduction
-template <class Stage>
-struct EvalOf {
-  Stage stage;
-  CPS_HD auto operator()(int i) const { return stage.eval(i); }
-};
-
-// no per-scene update after a reduction (a state evaluated, not stepped)
-struct NoFinalize {
-  CPS_HD void operator()(int) const {}
-};
-
 // the block averages: add this step's airfoil force over dt; a full block is closed, and
 // when all kMaxBlocks are full adjacent pairs are merged and the block length doubles
 // (batch means with a growing batch: the standard error stays honest for correlated series)
@@ -576,44 +200,6 @@ template <int D>
 CPS_HD CPS_INLINE float stream_speed(const Model<D>& m, const Control& u) {
   return m.speed * (1.0f + u.speed_scale);
 }
-
-// stage 3 (one item per scene): dt, the block averages, the clock
-template <int D>
-struct FinalizeStage {
-  const Model<D>* model;
-  Scene<D>* g;
-  const Control* ctl;
-  CPS_HD void operator()(int) const {
-    const Model<D>& m = *model;
-    Scene<D>& G = *g;
-    Clock& C = G.clock;
-    G.n_leaving = 0;  // this step's list (filled by the integration)
-    if (clock_at_end(C)) {
-      G.step_dt = 0.0f;
-      return;
-    }
-    if (C.bad) {
-      if (C.bad_step < 0) C.bad_step = C.step;
-      G.step_dt = 0.0f;
-      return;
-    }
-    const StepSums<D>& S = G.pending;
-    if (!finite(S.vmax2) || !finite(S.force[0] + S.force[1] + S.moment)) {
-      C.bad = kBadParticles;
-      C.bad_step = C.step + 1;
-      G.step_dt = 0.0f;
-      return;
-    }
-    bool last;
-    const float dt = clip_to_end(C, choose_dt(m, S.vmax2), last);
-    G.sums = S;
-    // the forces of this step's state act over [time, time + dt]
-    if (C.time >= m.measure_start) accumulate_blocks(G, S, double(dt));
-    G.step_dt = dt;
-    G.inflow_x += double(stream_speed(m, *ctl)) * double(dt);  // the conveyor's slots move in
-    advance_clock(C, dt, last);
-  }
-};
 
 // a particle that left through the inflow or the outflow re-enters at the inflow as a new
 // free-stream particle: it crossed the boundary a fraction `frac` of the step ago (from its
@@ -834,28 +420,58 @@ CPS_HD CPS_INLINE bool keep_out(const Model<D>& m, const AirfoilFrame& af, Vec<D
   return moved;
 }
 
-// stage 4: integrate (forward or symplectic Euler), recycle at the outflow, keep every
-// particle in the channel and out of the airfoil
-// (D = 3: and take z back into the periodic span)
+// The hooks of the DEM module's stages (dem/stages.h)
+
+// the reorder hook: the airfoil flag moves with its particle
+struct ReorderScattered {
+  const int* scattered;
+  int* scattered_alt;
+  CPS_HD void operator()(int j, int o) const { scattered_alt[j] = scattered[o]; }
+};
+
+// the force hook: the two walls and the airfoil (boundary_forces), the reaction on the
+// airfoil into the step's sums item, the airfoil flag set on a contact
 template <int D>
-struct IntegrateStage {
+struct Boundary {
+  const Model<D>* model;
+  const Control* ctl;
+  int* scattered;
+  CPS_HD Vec<D> operator()(int i, const Vec<D>& x, const Vec<D>& v, float& pressure, int& contacts,
+                           StepSums<D>& it) const {
+    const Model<D>& m = *model;
+    int sc = scattered[i];
+    const Vec<D> F = boundary_forces(m, airfoil_frame(m, *ctl), x, v, pressure, contacts, it, sc);
+    scattered[i] = sc;
+    return F;
+  }
+};
+
+// the finalize hook: this step's leaving list emptied, the airfoil's force and moment checked,
+// and for a step taken the block averages (from measure_start on) and the conveyor's phase
+template <int D>
+struct Finalize {
+  const Model<D>* model;
+  const Control* ctl;
+  CPS_HD void begin(Scene<D>& G) const { G.n_leaving = 0; }  // this step's list (filled by the integration)
+  CPS_HD bool sums_finite(const StepSums<D>& S) const { return finite(S.force[0] + S.force[1] + S.moment); }
+  CPS_HD void taken(Scene<D>& G, const StepSums<D>& S, float dt) const {
+    const Model<D>& m = *model;
+    if (G.clock.time >= m.measure_start) accumulate_blocks(G, S, double(dt));
+    G.inflow_x += double(stream_speed(m, *ctl)) * double(dt);  // the conveyor's slots move in
+  }
+};
+
+// the integrate hook: recycle at the outflow (and, recycle_scattered, a scattered particle at a
+// wall), keep every particle in the channel and out of the airfoil (the periodic span is the
+// DEM stage's)
+template <int D>
+struct Outflow {
   const Model<D>* model;
   Scene<D>* g;
   const Control* ctl;
   Arrays<D> s;
-  CPS_HD void operator()(int i) const {
-    const float dt = g->step_dt;
-    if (!(dt > 0.0f)) return;  // a step not taken leaves the particles as they are
+  CPS_HD void after(int i, float dt, Vec<D>& x, Vec<D>& v) const {
     const Model<D>& m = *model;
-    Vec<D> x = s.pos[i], v = s.vel[i];
-    const Vec<D> a = s.force[i] * (1.0f / m.mass);
-    if (m.integrator == kSymplecticEuler) {
-      v += a * dt;
-      x += v * dt;
-    } else {
-      x += v * dt;
-      v += a * dt;
-    }
     int scattered = s.scattered[i];
     const bool at_wall = x[1] - m.lo[1] < m.radius || m.hi[1] - x[1] < m.radius;
     if (m.recycle_scattered && scattered && at_wall && !(x[0] > m.hi[0] || x[0] < m.lo[0])) {
@@ -879,16 +495,8 @@ struct IntegrateStage {
         conveyor_claim(m, g, s.id[i], 0);
       }
     }
-    wrap_span(m, x);
     if (keep_out(m, airfoil_frame(m, *ctl), x, v)) add_count(&g->pushouts, 1);
-    if constexpr (D == 2) {
-      if (!finite(x[0] + x[1] + v[0] + v[1])) raise_first(&g->clock.bad, kBadParticles);
-    } else {
-      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&g->clock.bad, kBadParticles);
-    }
     s.scattered[i] = scattered;
-    s.pos[i] = x;
-    s.vel[i] = v;
   }
 };
 
