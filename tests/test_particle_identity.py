@@ -103,3 +103,15 @@ def test_ids_in_checkpoints_and_exports(kind, tmp_path):
     vtu = sorted(out.parent.rglob("*.vtu")) if out.is_file() else sorted(out.rglob("*.vtu"))
     text = "".join(p.read_text(errors="replace") for p in vtu)
     assert 'Name="id"' in text and 'type="Int32"' in text
+
+
+def test_batch_ids_stay_within_their_scene():
+    from corpuscle.batch import Batch
+
+    b = Batch.from_scene("magic8ball", n=3, backend="serial", particles=600, settle=0.0)
+    b.step(40)
+    ids = np.asarray(b.field("id", copy=True))
+    n = len(ids) // 3
+    assert not np.array_equal(ids, np.arange(len(ids)))  # re-sorted
+    for s in range(3):  # scene s holds ids s n ... (s + 1) n - 1
+        assert np.array_equal(np.sort(ids[s * n:(s + 1) * n]), np.arange(s * n, (s + 1) * n))
