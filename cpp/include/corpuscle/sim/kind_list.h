@@ -11,6 +11,7 @@
 // kinds() and bytes_needed, and each backend's make_sim, read it.
 #pragma once
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -57,12 +58,18 @@ struct IndexList {
   }
 };
 
+// an entry's `static constexpr bool hidden = true`: a kind built for tests
+template <class K, class = void>
+struct kind_hidden : std::false_type {};
+template <class K>
+struct kind_hidden<K, std::void_t<decltype(K::hidden)>> : std::bool_constant<K::hidden> {};
+
 template <class... Kinds>
 struct KindList {
-  // (name, index names) of every kind, in the list's order
+  // (name, index names, hidden) of every kind, in the list's order
   template <class Info>
   static std::vector<Info> infos() {
-    return {Info{Kinds::name, Kinds::Indexes::names()}...};
+    return {Info{Kinds::name, Kinds::Indexes::names(), kind_hidden<Kinds>::value}...};
   }
   // f(Kind{}) for the kind named `kind`; an unknown name throws
   template <class F>

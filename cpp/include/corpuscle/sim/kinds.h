@@ -2,6 +2,7 @@
 // make_sim read it. A new kind adds its entry here (sim/kind_list.h says what an entry has);
 // its name and index names are spelled once, in its own build.h.
 #pragma once
+#include "corpuscle/scenes/fields_test/fields_test.h"
 #include "corpuscle/scenes/magic8ball/build.h"
 #include "corpuscle/scenes/sph/build.h"
 #include "corpuscle/scenes/wind_tunnel/build.h"
@@ -10,7 +11,7 @@
 namespace cps {
 
 using Kinds = KindList<m8::Entry, wt::Entry<2>, wt::Entry<3>, sph::Entry<sph::FluidBoxKind>,
-                       sph::Entry<sph::DamBreakKind>, sph::Entry<sph::DamBreak2Kind>>;
+                       sph::Entry<sph::DamBreakKind>, sph::Entry<sph::DamBreak2Kind>, ftest::Entry>;
 
 // a simulation of r's kind on the backend `ex`
 template <class Exec>
