@@ -4,10 +4,11 @@
 // and CPS_KIND_STORED_TABLES (inside its Pipeline<Exec, ...>) generates from it
 //   - the field table (names, dtypes, shapes: Simulation.field, checkpoints, frames),
 //   - a buffer per field in the Exec's memory (FieldStore `fields_`; two for a field that
-//     `moves`: the current and the other, sorted, one), sized by resize_fields(n),
-//   - FieldPtrs, the device pointers the stages take (`name`: the current slots, `name_alt`:
-//     the other buffer), with gather(j, o), which copies every moving field of slot o into
-//     slot j of the other buffers (the reorder by the sort's permutation),
+//     `moves`: the current and the other, sorted, one), sized by fields_.resize(n),
+//   - the device pointers the stages take (CPS_FIELD_PTRS in the kind's arrays struct: `name`,
+//     the current slots, `name_alt`, the other buffer; filled by fields_.fill), with
+//     gather(j, o), which copies every moving field of slot o into slot j of the other
+//     buffers (the reorder by the sort's permutation),
 //   - field_view / field_upload (view(), upload(), downloads and checkpoints through SimImpl),
 //   - field_bytes(n) (bytes_needed's part for the fields).
 // `moves`: the field is part of the particle (gathered with it by every reorder, carried by
@@ -60,13 +61,16 @@ struct FieldBuffer {
 #define CPS_FS_MEMBER_(name, T, comps, group, ckpt, settable, recorded, moves) \
   ::cps::FieldBuffer<Exec, CPS_FS_ITEM_(T, comps), moves> name;
 #define CPS_FS_RESIZE_(name, T, comps, group, ckpt, settable, recorded, moves) name.resize(n);
-#define CPS_FS_PTRS_(name, T, comps, group, ckpt, settable, recorded, moves) \
+#define CPS_FS_FILL_(name, T, comps, group, ckpt, settable, recorded, moves) \
   p.name = name.cur(parity);                                                \
   p.name##_alt = name.alt(parity);
 #define CPS_FS_BYTES_(name, T, comps, group, ckpt, settable, recorded, moves) \
   +double(sizeof(CPS_FS_ITEM_(T, comps))) * ((moves) ? 2 : 1)
-#define CPS_FS_VIEW_(name, T, comps, group, ckpt, settable, recorded, moves) \
-  if (field == #name) return {static_cast<void*>(fields_.name.cur(parity)), n};
+#define CPS_FS_VIEW_(name, T, comps, group, ckpt, settable, recorded, moves)      \
+  if (field == #name) {                                                           \
+    out = {static_cast<void*>(fields_.name.cur(parity)), (long long)(count)};    \
+    return true;                                                                  \
+  }
 #define CPS_FS_UPLOAD_(name, T, comps, group, ckpt, settable, recorded, moves)                 \
   if (field == #name) {                                                                        \
     ex.to_device(fields_.name.cur(parity), src, size_t(count) * sizeof(CPS_FS_ITEM_(T, comps))); \
@@ -75,38 +79,44 @@ struct FieldBuffer {
 #define CPS_FS_INFO_(name, T, comps, group, ckpt, settable, recorded, moves) \
   t.push_back(FieldInfo{#name, group, dtype_of<T>(), comps, ckpt, settable, recorded});
 
-// a kind's tables (sim/table.h) with its fields stored as above (inside its Pipeline; `Exec`
-// is the pipeline's backend)
-#define CPS_KIND_STORED_TABLES(FIELDS, SCALARS, CONTROLS, Record, Control)                        \
+// the device pointers of a stored table's fields (inside a struct the stages take: `name`,
+// the current slots, `name_alt`, the other buffer) and the reorder's copy: slot j of the other
+// buffers takes slot o's moving fields
+#define CPS_FIELD_PTRS(FIELDS) \
+  FIELDS(CPS_FS_PTR_)          \
+  CPS_HD void gather(int j, int o) const { FIELDS(CPS_FS_GATHER_) }
+
+// a kind's tables (sim/table.h) with the fields of FIELDS stored as above, then those of VIEWS
+// (sim/table.h's rows: views the pipeline gives itself, into the stored buffers; a macro
+// taking X and expanding to nothing when there are none). Inside its Pipeline: `Exec` is the
+// backend; `Ptrs` the struct with CPS_FIELD_PTRS(FIELDS) the stages take. Generates
+// field_table(), FieldStore `fields_` (resize(n): every buffer n slots; fill(ptrs, parity)),
+// field_bytes(n), and field_view / field_upload of the stored fields (the first `count` slots)
+#define CPS_KIND_STORED_TABLES(FIELDS, VIEWS, SCALARS, CONTROLS, Record, Control, Ptrs)           \
   CPS_KIND_SCALAR_TABLES_(SCALARS, CONTROLS, Record, Control)                                     \
   static std::vector<FieldInfo> field_table() {                                                   \
     std::vector<FieldInfo> t;                                                                     \
     FIELDS(CPS_FS_INFO_)                                                                          \
+    VIEWS(CPS_TABLE_FIELD_)                                                                       \
     return t;                                                                                     \
   }                                                                                               \
-  struct FieldPtrs {                                                                              \
-    FIELDS(CPS_FS_PTR_)                                                                           \
-    /* slot j of the other buffers takes slot o's moving fields */                               \
-    CPS_HD void gather(int j, int o) const { FIELDS(CPS_FS_GATHER_) }                             \
-  };                                                                                              \
   struct FieldStore {                                                                             \
     FIELDS(CPS_FS_MEMBER_)                                                                        \
     void resize(size_t n) { FIELDS(CPS_FS_RESIZE_) }                                              \
-    FieldPtrs ptrs(int parity) {                                                                  \
-      FieldPtrs p;                                                                                \
-      FIELDS(CPS_FS_PTRS_)                                                                        \
-      return p;                                                                                   \
-    }                                                                                             \
+    void fill(Ptrs& p, int parity) { FIELDS(CPS_FS_FILL_) }                                       \
   };                                                                                              \
   static double field_bytes(double n) { return n * (0.0 FIELDS(CPS_FS_BYTES_)); }                 \
-  std::pair<void*, long long> field_view(const std::string& field, int parity, long long n) {    \
+  bool field_view(const std::string& field, int parity, long long count, std::pair<void*, long long>& out) { \
     FIELDS(CPS_FS_VIEW_)                                                                          \
-    throw Error(std::string(kind) + ": no field '" + field + "'");                                \
+    return false;                                                                                 \
   }                                                                                               \
   bool field_upload(Exec& ex, const std::string& field, const void* src, long long count, int parity) { \
     FIELDS(CPS_FS_UPLOAD_)                                                                        \
     return false;                                                                                 \
   }                                                                                               \
   FieldStore fields_;
+
+// VIEWS of a kind with none
+#define CPS_NO_FIELDS(X)
 
 }  // namespace cps

@@ -1,7 +1,7 @@
 // `fields-test`: a kind built for tests (hidden: _core.kinds(hidden=True) lists it) and the
 // worked example of fields that own their storage (sim/field_store.h). Free particles in a
 // 2-D box: each step keys and sorts them on the engine's cell grid, gathers every moving field
-// by the sort's permutation (FieldPtrs::gather), and moves them ballistically (a body
+// by the sort's permutation (Fields::gather), and moves them ballistically (a body
 // acceleration from the control), reflecting at the walls.
 //
 // Its `distance` field (the path length each particle has travelled) is what adding a field
@@ -32,6 +32,11 @@ constexpr int D = 2;
   X(id, int, 1, "fluid", true, false, true, true)             \
   X(distance, float, 1, "fluid", true, false, true, true)     \
   X(speed, float, 1, "fluid", false, false, false, false)
+
+// the device pointers the stages take
+struct Fields {
+  CPS_FIELD_PTRS(CPS_FTEST_FIELDS)
+};
 
 struct Model {
   int n;
@@ -119,7 +124,7 @@ class Pipeline {
     static const char* const names[] = {"sort+reorder", "move"};
     return names[s];
   }
-  CPS_KIND_STORED_TABLES(CPS_FTEST_FIELDS, CPS_FTEST_SCALARS, CPS_FTEST_CONTROLS, Scene, Control)
+  CPS_KIND_STORED_TABLES(CPS_FTEST_FIELDS, CPS_NO_FIELDS, CPS_FTEST_SCALARS, CPS_FTEST_CONTROLS, Scene, Control, Fields)
 
   static CellGridSpec<D> grid_spec(const Model& m) { return make_cell_grid<D>(m.lo, m.hi, m.cell); }
   static double bytes_needed(const Model& m) {
@@ -153,14 +158,18 @@ class Pipeline {
   void enqueue(bool integrate) {
     const int cur = parity_, nxt = parity_ ^ 1;
     grid_.sort(ex_, fields_.position.cur(cur), nullptr, m_.n);
-    ex_.for_each(m_.n, ReorderStage<FieldPtrs>{grid_.order(), fields_.ptrs(cur)});
+    ex_.for_each(m_.n, ReorderStage<Fields>{grid_.order(), ptrs(cur)});
     ex_.mark(0);
     if (integrate) ex_.single(FinalizeStage{model_.data(), g_});
-    ex_.for_each(m_.n, MoveStage<FieldPtrs>{model_.data(), g_, u_, fields_.ptrs(nxt), integrate});
+    ex_.for_each(m_.n, MoveStage<Fields>{model_.data(), g_, u_, ptrs(nxt), integrate});
     ex_.mark(1);
   }
 
-  std::pair<void*, long long> view(const std::string& name, const Scene&) { return field_view(name, parity_, m_.n); }
+  std::pair<void*, long long> view(const std::string& name, const Scene&) {
+    std::pair<void*, long long> out;
+    if (!field_view(name, parity_, m_.n, out)) throw Error(std::string(kind) + ": no field '" + name + "'");
+    return out;
+  }
 
   // positions restart the ids at 0..n-1 and the distances at 0
   void upload(const std::string& name, const void* src, long long count) {
@@ -179,6 +188,11 @@ class Pipeline {
 
  private:
   template <class T> using Buf = typename Exec::template Buffer<T>;
+  Fields ptrs(int parity) {
+    Fields p;
+    fields_.fill(p, parity);
+    return p;
+  }
   Exec& ex_;
   Model m_;
   Scene* g_;
