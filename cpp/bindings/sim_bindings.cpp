@@ -214,11 +214,14 @@ void bind_sim(nb::module_& m) {
     }
   });
 
-  m.def("kinds", [] {
+  m.def("kinds", [](bool hidden) {
     nb::dict d;
-    for (const KindInfo& k : kinds()) d[k.kind.c_str()] = k.indexes;
+    for (const KindInfo& k : kinds())
+      if (hidden || !k.hidden) d[k.kind.c_str()] = k.indexes;
     return d;
-  }, "Scene kinds this core simulates -> their index plug-ins (the first is the default).");
+  }, nb::arg("hidden") = false,
+     "Scene kinds this core simulates -> their index plug-ins (the first is the default); hidden: also the "
+     "kinds built for tests.");
   m.def("bytes_needed", [](const std::string& kind, const std::string& index, nb::dict params) {
     DictParams p(params);
     return bytes_needed(request(kind, "cpu", index, 0, &p, nullptr));
@@ -398,6 +401,7 @@ void bind_sim(nb::module_& m) {
                d["components"] = f.components;
                d["checkpointed"] = f.checkpointed;
                d["settable"] = f.settable;
+               d["recorded"] = f.recorded;
                l.append(d);
              }
              return l;
@@ -497,6 +501,20 @@ void bind_sim(nb::module_& m) {
              }
              s.sim->restore(snap);
            }, nb::arg("state"), "Replace the whole state by a checkpoint's (as checkpoint() returns it).")
+      .def("packed_size", [](PySim& s) { return s.sim->packed_size(); },
+           "Bytes of one particle's record (pack / unpack).")
+      .def("pack", [](PySim& s, long long slot) {
+             std::string rec(s.sim->packed_size(), '\0');
+             s.sim->pack(slot, rec.data());
+             return nb::bytes(rec.data(), rec.size());
+           }, nb::arg("slot"),
+           "Slot `slot`'s record: every checkpointed fluid field's item, in the field table's order.")
+      .def("unpack", [](PySim& s, long long slot, nb::bytes rec) {
+             if (rec.size() != s.sim->packed_size())
+               throw nb::value_error(("unpack: a record has " + std::to_string(s.sim->packed_size()) + " bytes, got " +
+                                      std::to_string(rec.size())).c_str());
+             s.sim->unpack(slot, rec.c_str());
+           }, nb::arg("slot"), nb::arg("record"), "Write a record (as pack() returns it) into slot `slot`.")
       .def("bench", [](PySim& s, long long n) {
              nb::gil_scoped_release r;
              return s.sim->bench(n);

@@ -42,6 +42,7 @@ UNITS = {
     "cd": "-",
     "n_particles": "count",
     "n_ghosts": "count",
+    "id": "-",
 }
 
 

@@ -120,8 +120,8 @@ def test_header_describes_the_kind(made):
 
 def test_frame_fields_and_groups_come_from_the_core(made):
     f = made.frame(ghosts=True, velocity=True)
-    assert list(f["fields"]) == ["position", "density", "pressure", "velocity", "ghost_position"]
-    assert f["groups"] == {"position": "fluid", "density": "fluid", "pressure": "fluid", "velocity": "fluid",
+    assert list(f["fields"]) == ["id", "position", "density", "pressure", "velocity", "ghost_position"]
+    assert f["groups"] == {"id": "fluid", "position": "fluid", "density": "fluid", "pressure": "fluid", "velocity": "fluid",
                            "ghost_position": "ghost"}
     assert set(f["diagnostics"]) <= set(made.header()["units"])
 

@@ -1,8 +1,6 @@
 // Every kind on the CUDA backend: the shared pipelines over CudaExec, and the device list.
 #include "corpuscle/core/devices.h"
-#include "corpuscle/scenes/magic8ball/build.h"
-#include "corpuscle/scenes/wind_tunnel/build.h"
-#include "corpuscle/scenes/sph/build.h"
+#include "corpuscle/sim/kinds.h"
 #include "corpuscle/sim/registry.h"
 #include "cuda/exec_cuda.cuh"
 
@@ -45,10 +43,7 @@ static void use_device(int device) {
 
 std::unique_ptr<Sim> make_sim_cuda(const SimRequest& r) {
   use_device(r.device);
-  if (r.kind == "magic8ball") return m8::make(CudaExec(), r);
-  if (wt::is_kind(r.kind)) return wt::make(CudaExec(), r);  // wind-tunnel, wind-tunnel-3d
-  if (sph::is_kind(r.kind)) return sph::make_kind(CudaExec(), r);
-  throw Error("unknown scene kind '" + r.kind + "'");
+  return make_kind(CudaExec(), r);
 }
 
 double bytes_available_cuda(int device) {

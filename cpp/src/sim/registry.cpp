@@ -8,9 +8,7 @@
 #include <cstring>
 
 #include "corpuscle/core/error.h"
-#include "corpuscle/scenes/magic8ball/build.h"
-#include "corpuscle/scenes/wind_tunnel/build.h"
-#include "corpuscle/scenes/sph/build.h"
+#include "corpuscle/sim/kinds.h"
 #include "cpu/exec_cpu.h"
 
 namespace cps {
@@ -22,11 +20,7 @@ Vec3 ParamSource::vec3(const std::string& key) const {
 }
 
 const std::vector<KindInfo>& kinds() {
-  static const std::vector<KindInfo> k = {{"magic8ball", m8::index_names()}, {"wind-tunnel", wt::index_names()},
-                                              {"wind-tunnel-3d", wt::index_names()},
-                                              {"fluid-box", sph::index_names()},
-                                              {"dam-break", sph::index_names()},
-                                              {"dam-break-2d", sph::index_names()}};
+  static const std::vector<KindInfo> k = Kinds::infos<KindInfo>();
   return k;
 }
 
@@ -53,9 +47,7 @@ std::unique_ptr<Sim> make_sim(const SimRequest& r) {
 
 double bytes_needed(const SimRequest& r) {
   kind_of(r);
-  if (wt::is_kind(r.kind)) return wt::bytes<CpuExec>(r);
-  if (sph::is_kind(r.kind)) return sph::bytes<CpuExec>(r);
-  return m8::bytes<CpuExec>(r);
+  return Kinds::with(r.kind, [&](auto kind) { return decltype(kind)::template bytes<CpuExec>(r); });
 }
 
 // MemAvailable of /proc/meminfo (what can be allocated without swapping), else free pages.

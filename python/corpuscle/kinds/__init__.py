@@ -69,7 +69,9 @@ Reading the state
 ``frame(sim, ghosts, velocity)`` *
     Keyword arguments for ``FrameWriter.write_frame``. The default records the fields in
     ``frame_fields``, ``velocity`` when asked, the fields in ``ghost_fields`` when asked
-    (each in its core group), ``rigid_poses`` and ``diagnostics``.
+    (each in its core group), ``rigid_poses`` and ``diagnostics``; and the particles'
+    ``id`` first, whenever the kind's field table has one, and the fields its table marks
+    ``recorded`` (sim/field_store.h).
 ``unstable_reasons`` *
     The core's instability codes (the ``bad`` scalar) -> text, for ``check_health()``.
 ``units`` *
@@ -127,6 +129,11 @@ __all__ = ["Kind", "Build", "Target", "register", "find", "get", "registry", "co
 
 # the run keys every kind declares (the CLI's --time and --every set them)
 REQUIRED_KEYS = ("run.end_time", "run.record_every")
+
+# the field every kind's frames carry first: a particle's index in the initial arrays (kept
+# through every re-sort; a batch of scenes numbers them scene by scene, scene s holding ids
+# s * n to (s + 1) * n - 1)
+ID_FIELD = "id"
 
 
 @dataclass(frozen=True)
@@ -195,8 +202,14 @@ class Kind:
         return {"container": None, "obstacles": [], "bodies": []}
 
     def frame(self, sim, ghosts: bool = False, velocity: bool = False) -> dict[str, Any]:
-        group = {f["name"]: f["group"] for f in sim.field_info()}
-        names = list(self.frame_fields)
+        info = sim.field_info()
+        group = {f["name"]: f["group"] for f in info}
+        # every frame carries each particle's id (the engine writes its particles in sorted
+        # order, which changes when they are re-sorted: the id follows a particle)
+        names = [ID_FIELD] if ID_FIELD in group and ID_FIELD not in self.frame_fields else []
+        names += list(self.frame_fields)
+        # and the fields the core's table marks recorded
+        names += [f["name"] for f in info if f.get("recorded") and f["name"] not in names]
         if velocity:
             names.append("velocity")
         if ghosts:

@@ -134,7 +134,7 @@ class SphBox(Kind):
 
     particle_key = "fluid.particles"
     unstable_reasons = UNSTABLE_REASONS
-    frame_fields = ("position", "density", "pressure")
+    frame_fields = ()  # the core's table marks what frames record (position, density, pressure)
     default_particles: dict[str, int] = {}
 
     def __init__(self) -> None:

@@ -6,11 +6,19 @@ from __future__ import annotations
 BACKENDS = ("serial", "cpu", "cuda")
 
 
+def sph_indexes() -> tuple[str, ...]:
+    """The SPH kinds' neighbour searches as the core lists them, the default first."""
+    from .. import _core
+
+    return tuple(dict(_core.kinds())["dam-break"])
+
+
 def add_engine(parser, default_backend: str = "cpu") -> None:
     parser.add_argument("--backend", choices=BACKENDS, default=default_backend,
                         help=f"compute backend (default: {default_backend})")
-    parser.add_argument("--neighbors", choices=("lists", "grid", "compact", "allpairs"), default="lists",
-                        help="neighbour search (default: lists, as the scenes run)")
+    indexes = sph_indexes()
+    parser.add_argument("--neighbors", choices=indexes, default=indexes[0],
+                        help=f"neighbour search (default: {indexes[0]}, as the scenes run)")
     parser.add_argument("--device", type=int, default=0, help="CUDA device (default: 0)")
 
 

@@ -13,6 +13,7 @@ namespace cps {
 struct KindInfo {
   std::string kind;
   std::vector<std::string> indexes;  // the first is the default
+  bool hidden = false;               // built for tests: _core.kinds() lists it only when asked
 };
 
 const std::vector<KindInfo>& kinds();

@@ -77,6 +77,13 @@ class Sim {
   // replace a field's values (the kind decides which fields may be set and what follows)
   virtual void upload(const std::string& name, const void* src, long long count) = 0;
 
+  // one particle's record: every checkpointed field of the group "fluid" (the particles the
+  // kind counts), in the field table's order, its slot's items one after another (what moves
+  // a particle between ranks); unpack writes a record into a slot (the next step re-sorts)
+  virtual size_t packed_size() const = 0;
+  virtual void pack(long long slot, void* record) = 0;
+  virtual void unpack(long long slot, const void* record) = 0;
+
   // the state the next step reads / replace it (the step after either sorts and relists,
   // so a run that checkpoints and the run resumed from it take identical steps)
   virtual Snapshot checkpoint() = 0;

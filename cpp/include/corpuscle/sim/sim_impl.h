@@ -206,6 +206,32 @@ class SimImpl final : public Sim {
     p_.upload(name, src, count);
   }
 
+  size_t packed_size() const override {
+    size_t bytes = 0;
+    for (const FieldInfo& f : fields_)
+      if (packed(f)) bytes += item_size(f);
+    return bytes;
+  }
+  void pack(long long slot, void* record) override {
+    unsigned char* out = static_cast<unsigned char*>(record);
+    ex_.synchronize();
+    for (const FieldInfo& f : fields_) {
+      if (!packed(f)) continue;
+      ex_.to_host(out, packed_item(f, slot), item_size(f));
+      out += item_size(f);
+    }
+  }
+  void unpack(long long slot, const void* record) override {
+    const unsigned char* in = static_cast<const unsigned char*>(record);
+    ex_.synchronize();
+    for (const FieldInfo& f : fields_) {
+      if (!packed(f)) continue;
+      ex_.to_device(packed_item(f, slot), in, item_size(f));
+      in += item_size(f);
+    }
+    p_.invalidate(true);  // the next step sorts and relists
+  }
+
   Snapshot checkpoint() override {
     Snapshot s;
     for (const FieldInfo& f : fields_) {
@@ -347,6 +373,16 @@ class SimImpl final : public Sim {
 
  private:
   static bool halted(const Record& r) { return r.clock.done != 0 || r.clock.bad != 0; }
+  static bool packed(const FieldInfo& f) { return f.checkpointed && f.group == "fluid"; }
+  static size_t item_size(const FieldInfo& f) { return size_t(f.components) * dtype_size(f.dtype); }
+  // the item of slot `slot` of a packed field, in the backend's memory
+  unsigned char* packed_item(const FieldInfo& f, long long slot) {
+    auto [ptr, count] = p_.view(f.name, records()[0]);
+    if (slot < 0 || slot >= count)
+      throw Error(std::string(P::kind) + ": slot " + std::to_string(slot) + " out of range (" + f.name + " has " +
+                  std::to_string(count) + ")");
+    return static_cast<unsigned char*>(ptr) + size_t(slot) * item_size(f);
+  }
   [[noreturn]] static void unsupported(const char* what) {
     throw Error(std::string(P::kind) + ": this kind has no " + what + " (batches of scenes: magic8ball)");
   }

@@ -30,6 +30,7 @@ struct FieldInfo {
   int components;      // 1: scalar per particle; 2 or 3: a vector
   bool checkpointed;   // part of the state the next step reads
   bool settable;       // upload() accepts it
+  bool recorded = false;  // every frame carries it (tables of sim/field_store.h say which)
 };
 
 // a scalar of the per-scene record or of the control: `count` values at `offset`
@@ -112,6 +113,9 @@ CPS_HD CPS_INLINE void raise_first(int* p, int code) { atomic_cas(p, 0, code); }
     FIELDS(CPS_TABLE_FIELD_)                                                                                    \
     return t;                                                                                                   \
   }                                                                                                             \
+  CPS_KIND_SCALAR_TABLES_(SCALARS, CONTROLS, Record, Control)
+// the scalar and control tables (of CPS_KIND_TABLES and field_store.h's CPS_KIND_STORED_TABLES)
+#define CPS_KIND_SCALAR_TABLES_(SCALARS, CONTROLS, Record, Control)                                             \
   static std::vector<ScalarInfo> scalar_table() {                                                               \
     std::vector<ScalarInfo> t;                                                                                  \
     Record s{};                                                                                                 \

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/sim/kind_list.h"
 #include "corpuscle/sim/params.h"
 #include "corpuscle/sim/sim_impl.h"
 #include "corpuscle/scenes/magic8ball/pipeline.h"
@@ -172,27 +173,21 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
 }
 
 // the index plug-ins of this kind, the first the default
-inline const std::vector<std::string>& index_names() {
-  static const std::vector<std::string> names = {ListsIndex::name, GridIndex::name, AllPairsIndex::name};
-  return names;
-}
+using Indexes = IndexList<ListsIndex, GridIndex, AllPairsIndex>;
 
-template <class Exec>
-std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
-  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
-  if (idx == ListsIndex::name) return make_with<Exec, ListsIndex>(std::move(ex), r);
-  if (idx == GridIndex::name) return make_with<Exec, GridIndex>(std::move(ex), r);
-  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex>(std::move(ex), r);
-  throw Error("magic8ball: unknown index '" + idx + "' (indexes: lists, grid, allpairs)");
-}
-
-template <class Exec>
-double bytes(const SimRequest& r) {
-  Model m = build_model(*r.params);
-  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
-  if (idx == GridIndex::name) return Pipeline<Exec, GridIndex>::bytes_needed(m);
-  if (idx == AllPairsIndex::name) return Pipeline<Exec, AllPairsIndex>::bytes_needed(m);
-  return Pipeline<Exec, ListsIndex>::bytes_needed(m);
-}
+// the kind in the list of kinds (sim/kinds.h)
+struct Entry {
+  static constexpr const char* name = "magic8ball";
+  using Indexes = m8::Indexes;
+  template <class Exec>
+  static std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
+    return Indexes::with(name, r.index, [&](auto index) { return make_with<Exec, decltype(index)>(std::move(ex), r); });
+  }
+  template <class Exec>
+  static double bytes(const SimRequest& r) {
+    Model m = build_model(*r.params);
+    return Indexes::with(name, r.index, [&](auto index) { return Pipeline<Exec, decltype(index)>::bytes_needed(m); });
+  }
+};
 
 }  // namespace cps::m8

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/sim/kind_list.h"
 #include "corpuscle/sim/params.h"
 #include "corpuscle/sim/sim_impl.h"
 #include "corpuscle/scenes/sph/pipeline.h"
@@ -116,50 +117,38 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
   return sim;
 }
 
-inline const std::vector<std::string>& index_names() {
-  // the first is the default: the lists (2.5 to 3 times the grid's steps/s on the H200 at
-  // 131,072 and 1,048,576 particles, 2026-12-02; faster on the CPU too)
-  static const std::vector<std::string> names = {ListsIndex::name, GridIndex::name, CompactIndex::name,
-                                                 AllPairsIndex::name};
-  return names;
-}
+// the index plug-ins, the first the default: the lists (2.5 to 3 times the grid's steps/s on
+// the H200 at 131,072 and 1,048,576 particles, 2026-12-02; faster on the CPU too)
+using Indexes = IndexList<ListsIndex, GridIndex, CompactIndex, AllPairsIndex>;
 
 template <class KindT, class Exec>
 std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
-  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
-  if (idx == GridIndex::name) return make_with<Exec, GridIndex, KindT>(std::move(ex), r);
-  if (idx == CompactIndex::name) return make_with<Exec, CompactIndex, KindT>(std::move(ex), r);
-  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex, KindT>(std::move(ex), r);
-  if (idx == ListsIndex::name) return make_with<Exec, ListsIndex, KindT>(std::move(ex), r);
-  throw Error(std::string(KindT::name) + ": unknown index '" + idx + "' (indexes: grid, compact, allpairs, lists)");
-}
-
-// any of the three kinds by name (null: not one of them)
-template <class Exec>
-std::unique_ptr<Sim> make_kind(Exec&& ex, const SimRequest& r) {
-  if (r.kind == FluidBoxKind::name) return make<FluidBoxKind>(std::move(ex), r);
-  if (r.kind == DamBreakKind::name) return make<DamBreakKind>(std::move(ex), r);
-  if (r.kind == DamBreak2Kind::name) return make<DamBreak2Kind>(std::move(ex), r);
-  return nullptr;
+  return Indexes::with(KindT::name, r.index, [&](auto index) {
+    return make_with<Exec, decltype(index), KindT>(std::move(ex), r);
+  });
 }
 
 template <class KindT, class Exec>
-double bytes_of(const SimRequest& r) {
-  auto m = std::make_unique<Model<KindT::D>>(build_model<KindT>(*r.params));
-  if (r.index == CompactIndex::name) return Pipeline<Exec, CompactIndex, KindT>::bytes_needed(*m);
-  if (r.index == ListsIndex::name) return Pipeline<Exec, ListsIndex, KindT>::bytes_needed(*m);
-  return Pipeline<Exec, GridIndex, KindT>::bytes_needed(*m);
-}
-
-template <class Exec>
 double bytes(const SimRequest& r) {
-  if (r.kind == DamBreak2Kind::name) return bytes_of<DamBreak2Kind, Exec>(r);
-  if (r.kind == DamBreakKind::name) return bytes_of<DamBreakKind, Exec>(r);
-  return bytes_of<FluidBoxKind, Exec>(r);
+  auto m = std::make_unique<Model<KindT::D>>(build_model<KindT>(*r.params));
+  return Indexes::with(KindT::name, r.index, [&](auto index) {
+    return Pipeline<Exec, decltype(index), KindT>::bytes_needed(*m);
+  });
 }
 
-inline bool is_kind(const std::string& k) {
-  return k == FluidBoxKind::name || k == DamBreakKind::name || k == DamBreak2Kind::name;
-}
+// a kind of this pipeline (fluid-box, dam-break, dam-break-2d) in the list of kinds (sim/kinds.h)
+template <class KindT>
+struct Entry {
+  static constexpr const char* name = KindT::name;
+  using Indexes = sph::Indexes;
+  template <class Exec>
+  static std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
+    return sph::make<KindT>(std::forward<Exec>(ex), r);
+  }
+  template <class Exec>
+  static double bytes(const SimRequest& r) {
+    return sph::bytes<KindT, Exec>(r);
+  }
+};
 
 }  // namespace cps::sph

@@ -176,23 +176,4 @@ struct alignas(32) PairRecord {
 };
 static_assert(sizeof(PairRecord<3>) == 32 && sizeof(PairRecord<2>) == 32, "a record is one 32-byte sector");
 
-// structure of arrays (slots in sorted order; *_alt: the other buffers)
-template <int D>
-struct Arrays {
-  Vec<D> *pos, *vel, *pos_alt, *vel_alt;
-  Vec<D> *velm, *velm_alt;  // the previous step's velocity (Verlet)
-  float *rho, *rho_alt;
-  float *rhom, *rhom_alt;   // the previous step's density (Verlet)
-  int *id, *id_alt;
-  float* prs;        // pressure of the sorted state (from rho by Tait)
-  PairRecord<D>* rec;  // the pair loop's neighbour records of the sorted state: the position
-                       // padded for one vector load (the lists' walk; 3-D: the density in the
-                       // fourth float, the pair loop's rho_j), velocity and p / rho^2
-  PairRho* pr;       // 2-D: the pair loop's rho and m / rho (the density diffusion's V_j)
-  Vec<D>* x_build;   // `lists`: positions at the last build (sorted slots; null for other indexes)
-  Vec<D>* acc;       // dv/dt (fluid; zero for walls)
-  float* drho;       // drho/dt
-  StepSums* items;
-};
-
 }  // namespace cps::sph

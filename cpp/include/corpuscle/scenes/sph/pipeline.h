@@ -126,16 +126,16 @@ class Pipeline {
 
   static double bytes_needed(const ModelT& m) {
     const double n = double(m.n_fluid) + double(m.n_wall);
-    const double per = 2 * (3 * sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int)) + sizeof(float) + sizeof(Vec<D>) +
-                       sizeof(PairRecord<D>) + (D == 2 ? sizeof(PairRho) : 0) +
-                       sizeof(float) + sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
-                       (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0);
+    const double per = field_bytes(1.0) + double(sizeof(PairRecord<D>) + (D == 2 ? sizeof(PairRho) : 0) +
+                       sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
+                       (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0));
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
     const double lists = kLists ? SlotNeighborList<D, Exec>::bytes(int(n), m.max_neighbors) : 0.0;
     return n * per + cells + lists + sizeof(ModelT);
   }
 
-  CPS_KIND_TABLES(CPS_SPH_FIELDS, CPS_SPH_SCALARS, CPS_SPH_CONTROLS, Scene, Control)
+  CPS_KIND_STORED_TABLES(CPS_SPH_FIELDS, CPS_SPH_WALL_FIELDS, CPS_SPH_SCALARS, CPS_SPH_CONTROLS, Scene, Control,
+                         Arrays<D>)
 
   Pipeline(Exec& ex, const ModelT& m, Scene* g, const Control* u)
       : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)) {
@@ -147,15 +147,7 @@ class Pipeline {
       throw Error(std::string(kind) + ": lanes must be 1, 2, 4 or 8 (0: automatic), got " + std::to_string(m_.lanes));
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(ModelT));
-    for (int p = 0; p < 2; ++p) {
-      pos_[p].resize(n_);
-      vel_[p].resize(n_);
-      velm_[p].resize(n_);
-      rho_[p].resize(n_);
-      rhom_[p].resize(n_);
-      id_[p].resize(n_);
-    }
-    prs_.resize(n_);
+    fields_.resize(size_t(n_));
     rec_.resize(n_);
     if constexpr (D == 2) pr_.resize(n_);  // (3-D: rho_j rides in the record's position)
     if constexpr (kLists) {
@@ -164,8 +156,6 @@ class Pipeline {
       x_build_.resize(n_);
       lists_.reserve(ex_, n_, m.max_neighbors);
     }
-    acc_.resize(n_);
-    drho_.resize(n_);
     items_.resize(n_);
     tags_.resize(n_);
     std::vector<int> tags(n_);
@@ -173,7 +163,7 @@ class Pipeline {
     ex_.to_device(tags_.data(), tags.data(), n_ * sizeof(int));
     std::vector<int> ids(n_);
     for (int i = 0; i < n_; ++i) ids[i] = i;
-    ex_.to_device(id_[0].data(), ids.data(), n_ * sizeof(int));
+    ex_.to_device(fields_.id.cur(0), ids.data(), n_ * sizeof(int));
   }
 
   static Scene initial_record(const ModelT&) {
@@ -248,17 +238,17 @@ class Pipeline {
     //    takes slot j from slot j. The lists are built on the steps that relist only.)
     if constexpr (kLists) {
       ex_.run_if(&g->rebuild, [&] {
-        grid_.sort_if(ex_, pos_[cur].data(), tags_.data(), n_, &g->rebuild);
+        grid_.sort_if(ex_, fields_.position.cur(cur), tags_.data(), n_, &g->rebuild);
         grid_.mark(ex_);
       });
       ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), &g->rebuild});
     } else {
-      grid_.sort(ex_, pos_[cur].data(), tags_.data(), n_);
+      grid_.sort(ex_, fields_.position.cur(cur), tags_.data(), n_);
       ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), nullptr});
       grid_.mark(ex_);
     }
     Arrays<D> s = arrays(nxt, cur);
-    CellGridView<D> gv = grid_.view(s.pos);
+    CellGridView<D> gv = grid_.view(s.position);
     if constexpr (std::is_same_v<Index, CompactIndex>) compact_.build(ex_, gv);
     if constexpr (kLists) {
       lists_.template fill<kListFillLanes>(ex_, gv, m_.list_radius, 0, nf_, &g->clock.bad, kBadNeighbors, &g->rebuild);
@@ -276,7 +266,7 @@ class Pipeline {
     // 3. the probes of this state (the grid's walk; all pairs for that index)
     if (m_.n_probes > 0) {
       if constexpr (std::is_same_v<Index, AllPairsIndex>)
-        ex_.for_each(m_.n_probes, ProbeStage<D, AllPairsView<D>>{md, g, s, AllPairsView<D>{s.pos, n_, m_.h * m_.h}, nf_});
+        ex_.for_each(m_.n_probes, ProbeStage<D, AllPairsView<D>>{md, g, s, AllPairsView<D>{s.position, n_, m_.h * m_.h}, nf_});
       else  // (lists: the cells of the last build, of the list radius, hold every fluid particle within h)
         ex_.for_each(m_.n_probes, ProbeStage<D, CellGridView<D>>{md, g, s, kLists ? gv.with_radius(m_.h) : gv, nf_});
     }
@@ -297,9 +287,11 @@ class Pipeline {
   std::pair<void*, long long> view(const std::string& name, const Scene&) {
     const int nf = nf_, nw = n_ - nf_;
     const int cur = parity_;
+    std::pair<void*, long long> stored;
+    if (field_view(name, cur, nf, stored)) return stored;
 #define CPS_FIELD_VIEW(fname, T, comps, group, ckpt, settable, storage, count) \
   if (name == #fname) return {static_cast<void*>(storage), (long long)(count)};
-    CPS_SPH_FIELDS(CPS_FIELD_VIEW)
+    CPS_SPH_WALL_FIELDS(CPS_FIELD_VIEW)
 #undef CPS_FIELD_VIEW
     throw Error(std::string(kind) + ": no field '" + name + "'");
   }
@@ -315,26 +307,26 @@ class Pipeline {
     const int cur = parity_;
     const size_t off = wall ? size_t(nf) : 0;
     if (name == "position" || name == "wall_position") {
-      ex_.to_device(pos_[cur].data() + off, src, count * sizeof(Vec<D>));
+      ex_.to_device(fields_.position.cur(cur) + off, src, count * sizeof(Vec<D>));
       std::vector<int> ids(count);
       for (long long i = 0; i < count; ++i) ids[i] = int(off + i);
-      ex_.to_device(id_[cur].data() + off, ids.data(), count * sizeof(int));
+      ex_.to_device(fields_.id.cur(cur) + off, ids.data(), count * sizeof(int));
       if (wall) {
         // the walls never move: their velocity is zero
         std::vector<Vec<D>> zero(count, Vec<D>::zero());
-        ex_.to_device(vel_[cur].data() + off, zero.data(), count * sizeof(Vec<D>));
-        ex_.to_device(velm_[cur].data() + off, zero.data(), count * sizeof(Vec<D>));
+        ex_.to_device(fields_.velocity.cur(cur) + off, zero.data(), count * sizeof(Vec<D>));
+        ex_.to_device(fields_.velocity_prev.cur(cur) + off, zero.data(), count * sizeof(Vec<D>));
       }
     } else if (name == "velocity" || name == "velocity_prev") {
       // a velocity set is also the previous step's (a checkpoint's velocity_prev comes after)
-      if (name == "velocity") ex_.to_device(vel_[cur].data(), src, count * sizeof(Vec<D>));
-      ex_.to_device(velm_[cur].data(), src, count * sizeof(Vec<D>));
+      if (name == "velocity") ex_.to_device(fields_.velocity.cur(cur), src, count * sizeof(Vec<D>));
+      ex_.to_device(fields_.velocity_prev.cur(cur), src, count * sizeof(Vec<D>));
     } else if (name == "density" || name == "wall_density" || name == "density_prev" || name == "wall_density_prev") {
       const bool prev = name.find("_prev") != std::string::npos;
-      if (!prev) ex_.to_device(rho_[cur].data() + off, src, count * sizeof(float));
-      ex_.to_device(rhom_[cur].data() + off, src, count * sizeof(float));
+      if (!prev) ex_.to_device(fields_.density.cur(cur) + off, src, count * sizeof(float));
+      ex_.to_device(fields_.density_prev.cur(cur) + off, src, count * sizeof(float));
     } else if (name == "id") {
-      ex_.to_device(id_[cur].data(), src, count * sizeof(int));
+      ex_.to_device(fields_.id.cur(cur), src, count * sizeof(int));
     } else {
       throw Error(std::string(kind) + ": field '" + name + "' cannot be set");
     }
@@ -372,7 +364,7 @@ class Pipeline {
       constexpr int stride = int(sizeof(PairRecord<D>) / sizeof(VecA<D>));
       list_pass_lanes(lists_.view(reinterpret_cast<const VecA<D>*>(s.rec), m_.h, stride), st);
     } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
-      AllPairsView<D> av{s.pos, n_, m_.h * m_.h};
+      AllPairsView<D> av{s.position, n_, m_.h * m_.h};
       if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
       else gather_stage(ex_, av, st);
     } else if constexpr (std::is_same_v<Index, CompactIndex>) {
@@ -407,24 +399,11 @@ class Pipeline {
 
   Arrays<D> arrays(int cur, int nxt) {
     Arrays<D> a;
-    a.pos = pos_[cur].data();
-    a.vel = vel_[cur].data();
-    a.pos_alt = pos_[nxt].data();
-    a.vel_alt = vel_[nxt].data();
-    a.rho = rho_[cur].data();
-    a.rho_alt = rho_[nxt].data();
-    a.velm = velm_[cur].data();
-    a.velm_alt = velm_[nxt].data();
-    a.rhom = rhom_[cur].data();
-    a.rhom_alt = rhom_[nxt].data();
-    a.id = id_[cur].data();
-    a.id_alt = id_[nxt].data();
-    a.prs = prs_.data();
+    fields_.fill(a, cur);  // (the other buffers: nxt = cur ^ 1)
+    (void)nxt;
     a.rec = rec_.data();
     a.pr = D == 2 ? pr_.data() : nullptr;
     a.x_build = kLists ? x_build_.data() : nullptr;
-    a.acc = acc_.data();
-    a.drho = drho_.data();
     a.items = items_.data();
     return a;
   }
@@ -436,16 +415,11 @@ class Pipeline {
   CellGrid<D, Exec> grid_;
   CompactGrid<D, Exec, kChunk> compact_;
   Buf<ModelT> model_;
-  Buf<Vec<D>> pos_[2], vel_[2], velm_[2];
-  Buf<float> rho_[2], rhom_[2];
-  Buf<int> id_[2];
-  Buf<float> prs_, drho_;
   Buf<PairRecord<D>> rec_;
   Buf<PairRho> pr_;
   Buf<Vec<D>> x_build_;
   SlotNeighborList<D, Exec> lists_;
   bool relist_ = false;
-  Buf<Vec<D>> acc_;
   Buf<StepSums> items_;
   Buf<int> tags_;
   int nf_ = 0, n_ = 0;

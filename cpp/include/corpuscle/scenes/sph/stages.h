@@ -4,7 +4,7 @@
 #pragma once
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/lanes.h"
-#include "corpuscle/scenes/sph/model.h"
+#include "corpuscle/scenes/sph/tables.h"
 
 namespace cps::sph {
 
@@ -30,17 +30,12 @@ struct ReorderStage {
   const int* rebuild = nullptr;  // `lists` only
   CPS_HD void operator()(int j) const {
     const int o = rebuild && *rebuild == 0 ? j : order[j];
-    const Vec<D> x = a.pos[o];
-    a.pos_alt[j] = x;
-    a.vel_alt[j] = a.vel[o];
-    a.velm_alt[j] = a.velm[o];
-    a.rhom_alt[j] = a.rhom[o];
-    const float rho = a.rho[o];
-    a.rho_alt[j] = rho;
-    a.id_alt[j] = a.id[o];
+    const Vec<D> x = a.position[o];
+    const float rho = a.density[o];
+    a.gather(j, o);  // every field that moves with the particle (tables.h)
     const float p = tait_pressure(*model, rho);
-    a.prs[j] = p;
-    const Vec<D> v = a.vel[o];
+    a.pressure[j] = p;
+    const Vec<D> v = a.velocity[o];
     PairVel pv;
     for (int k = 0; k < 3; ++k) pv.v[k] = k < D ? v[k] : 0.0f;
     pv.pr2 = p / (rho * rho);
@@ -124,8 +119,8 @@ struct InteractStage {
     s.drho = 0.0f;
     s.mu_max = 0.0f;
     s.nbrs = 0;
-    s.vel_i = a.vel[i];
-    s.rho_i = a.rho[i];
+    s.vel_i = a.velocity[i];
+    s.rho_i = a.density[i];
     s.pr2_i = a.rec[i].pv.pr2;
     return s;
   }
@@ -191,11 +186,11 @@ struct InteractStage {
 
   CPS_HD void end(int i, Acc& s) const {
     StepSums it = StepSums::identity();
-    it.p_max = a.prs[i];
+    it.p_max = a.pressure[i];
     if (i < nf) {
       Vec<D> acc = s.acc + m.gravity;
       for (int k = 0; k < D; ++k) acc[k] += ctl->acc[k];
-      a.acc[i] = acc;
+      a.acceleration[i] = acc;
       const Vec<D> v = s.vel_i;
       it.amax2 = norm2(acc);
       it.vmax2 = norm2(v);
@@ -205,10 +200,10 @@ struct InteractStage {
       it.nbrs = s.nbrs;
       if (!finite(it.amax2 + s.drho)) it.bad = 1;
     } else {
-      a.acc[i] = Vec<D>::zero();
+      a.acceleration[i] = Vec<D>::zero();
       if (!finite(s.drho)) it.bad = 1;
     }
-    a.drho[i] = s.drho;
+    a.density_rate[i] = s.drho;
     a.items[i] = it;
   }
 };
@@ -306,10 +301,10 @@ struct ProbeStage {
     Vec<D> sv = Vec<D>::zero();
     view.gather(-1, x, [&](int j, const Vec<D>&, float r2) {
       if (j >= nf) return;
-      const float wv = w.w_r2(r2) * (m.mass / a.rho[j]);
+      const float wv = w.w_r2(r2) * (m.mass / a.density[j]);
       sw += wv;
-      sp += a.prs[j] * wv;
-      sv += a.vel[j] * wv;
+      sp += a.pressure[j] * wv;
+      sv += a.velocity[j] * wv;
     });
     const float inv = sw > 0.0f ? 1.0f / sw : 0.0f;
     g->probe_w[k] = sw;
@@ -378,27 +373,27 @@ struct IntegrateStage {
     const Model<D>& m = *model;
     // the step counter is already this step's (finalize advanced it): steps 1, 1 + N, ... are Euler
     const bool euler = m.integrator == kSymplecticEuler || (g->clock.step - 1) % m.verlet_steps == 0;
-    const float rho0 = a.rho[i], rhom = a.rhom[i];
-    float rho = euler ? rho0 + a.drho[i] * dt : rhom + 2.0f * dt * a.drho[i];
+    const float rho0 = a.density[i], rhom = a.density_prev[i];
+    float rho = euler ? rho0 + a.density_rate[i] * dt : rhom + 2.0f * dt * a.density_rate[i];
     if (i >= nf) {
-      a.rhom[i] = rho0;
-      a.rho[i] = rho < m.rho0 ? m.rho0 : rho;
+      a.density_prev[i] = rho0;
+      a.density[i] = rho < m.rho0 ? m.rho0 : rho;
       return;
     }
-    const Vec<D> v0 = a.vel[i], acc = a.acc[i];
+    const Vec<D> v0 = a.velocity[i], acc = a.acceleration[i];
     Vec<D> v, x;
     if (m.integrator == kSymplecticEuler) {
       v = v0 + acc * dt;
-      x = a.pos[i] + v * dt;
+      x = a.position[i] + v * dt;
     } else {
-      v = euler ? v0 + acc * dt : a.velm[i] + acc * (2.0f * dt);
-      x = a.pos[i] + v0 * dt + acc * (0.5f * dt * dt);
+      v = euler ? v0 + acc * dt : a.velocity_prev[i] + acc * (2.0f * dt);
+      x = a.position[i] + v0 * dt + acc * (0.5f * dt * dt);
     }
-    a.velm[i] = v0;
-    a.rhom[i] = rho0;
-    a.vel[i] = v;
-    a.pos[i] = x;
-    a.rho[i] = rho;
+    a.velocity_prev[i] = v0;
+    a.density_prev[i] = rho0;
+    a.velocity[i] = v;
+    a.position[i] = x;
+    a.density[i] = rho;
     bool out = false;
     float sum = rho;
     for (int k = 0; k < D; ++k) {

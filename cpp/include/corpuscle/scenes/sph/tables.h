@@ -2,23 +2,29 @@
 // particles), the scalars of its per-scene record and its control.
 #pragma once
 #include "corpuscle/scenes/sph/model.h"
+#include "corpuscle/sim/field_store.h"
 
+// the fields that own their storage (sim/field_store.h): buffers of every slot, the fluid's
+// first (a field's view: the fluid slots [0, nf))
+// X(name, C type, components, group, checkpointed, settable, recorded, moves)
+#define CPS_SPH_FIELDS(X)                                            \
+  X(position, float, D, "fluid", true, true, true, true)             \
+  X(velocity, float, D, "fluid", true, true, false, true)            \
+  X(density, float, 1, "fluid", true, true, true, true)              \
+  X(id, int, 1, "fluid", true, false, true, true)                    \
+  X(velocity_prev, float, D, "fluid", true, false, false, true)      \
+  X(density_prev, float, 1, "fluid", true, false, false, true)       \
+  X(pressure, float, 1, "fluid", false, false, true, false)          \
+  X(acceleration, float, D, "fluid", false, false, false, false)     \
+  X(density_rate, float, 1, "fluid", false, false, false, false)
+
+// the wall particles' views of those buffers (slots [nf, nf + nw))
 // X(name, C type, components, group, checkpointed, settable, storage, count)
-// (cur: the current buffers, nf: fluid particles in slots [0, nf), nw: wall particles after them)
-#define CPS_SPH_FIELDS(X)                                                          \
-  X(position, float, D, "fluid", true, true, pos_[cur].data(), nf)                 \
-  X(velocity, float, D, "fluid", true, true, vel_[cur].data(), nf)                 \
-  X(density, float, 1, "fluid", true, true, rho_[cur].data(), nf)                  \
-  X(id, int, 1, "fluid", true, false, id_[cur].data(), nf)                         \
-  X(velocity_prev, float, D, "fluid", true, false, velm_[cur].data(), nf)          \
-  X(density_prev, float, 1, "fluid", true, false, rhom_[cur].data(), nf)           \
-  X(pressure, float, 1, "fluid", false, false, prs_.data(), nf)                    \
-  X(acceleration, float, D, "fluid", false, false, acc_.data(), nf)                \
-  X(density_rate, float, 1, "fluid", false, false, drho_.data(), nf)               \
-  X(wall_position, float, D, "wall", true, true, pos_[cur].data() + nf, nw)        \
-  X(wall_density, float, 1, "wall", true, true, rho_[cur].data() + nf, nw)         \
-  X(wall_density_prev, float, 1, "wall", true, false, rhom_[cur].data() + nf, nw)  \
-  X(wall_pressure, float, 1, "wall", false, false, prs_.data() + nf, nw)
+#define CPS_SPH_WALL_FIELDS(X)                                                                 \
+  X(wall_position, float, D, "wall", true, true, fields_.position.cur(cur) + nf, nw)          \
+  X(wall_density, float, 1, "wall", true, true, fields_.density.cur(cur) + nf, nw)            \
+  X(wall_density_prev, float, 1, "wall", true, false, fields_.density_prev.cur(cur) + nf, nw) \
+  X(wall_pressure, float, 1, "wall", false, false, fields_.pressure.cur(cur) + nf, nw)
 
 // X(name, C type, count, member of Scene, checkpointed)
 #define CPS_SPH_SCALARS(X)                              \
@@ -41,3 +47,20 @@
 
 // X(name, C type, count, member of Control)
 #define CPS_SPH_CONTROLS(X) X(acceleration, float, 3, acc)
+
+namespace cps::sph {
+
+// the arrays the stages take (slots in sorted order): the stored fields' pointers (`name`: the
+// current buffers, `name_alt`: the other ones) and the step's own
+template <int D>
+struct Arrays {
+  CPS_FIELD_PTRS(CPS_SPH_FIELDS)
+  PairRecord<D>* rec;  // the pair loop's neighbour records of the sorted state: the position
+                       // padded for one vector load (the lists' walk; 3-D: the density in the
+                       // fourth float, the pair loop's rho_j), velocity and p / rho^2
+  PairRho* pr;       // 2-D: the pair loop's rho and m / rho (the density diffusion's V_j)
+  Vec<D>* x_build;   // `lists`: positions at the last build (sorted slots; null for other indexes)
+  StepSums* items;
+};
+
+}  // namespace cps::sph

@@ -9,6 +9,7 @@
 
 #include "corpuscle/core/error.h"
 #include "corpuscle/dem/build.h"
+#include "corpuscle/sim/kind_list.h"
 #include "corpuscle/sim/params.h"
 #include "corpuscle/sim/sim_impl.h"
 #include "corpuscle/scenes/wind_tunnel/pipeline.h"
@@ -99,38 +100,27 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
   return sim;
 }
 
-inline const std::vector<std::string>& index_names() {
-  static const std::vector<std::string> names = {GridIndex::name, LbvhIndex::name, AllPairsIndex::name};
-  return names;
-}
+// the index plug-ins, the first the default
+using Indexes = IndexList<GridIndex, LbvhIndex, AllPairsIndex>;
 
-template <int D, class Exec>
-std::unique_ptr<Sim> make_dim(Exec&& ex, const SimRequest& r) {
-  const std::string& idx = r.index.empty() ? index_names()[0] : r.index;
-  if (idx == GridIndex::name) return make_with<Exec, GridIndex, D>(std::move(ex), r);
-  if (idx == AllPairsIndex::name) return make_with<Exec, AllPairsIndex, D>(std::move(ex), r);
-  if (idx == LbvhIndex::name) return make_with<Exec, LbvhIndex, D>(std::move(ex), r);
-  throw Error(std::string(kind_name<D>()) + ": unknown index '" + idx + "' (indexes: grid, lbvh, allpairs)");
-}
-
-// is this one of the wind tunnel's kinds (wind-tunnel, wind-tunnel-3d)?
-inline bool is_kind(const std::string& k) { return k == kind_name<2>() || k == kind_name<3>(); }
-
-// the kind of r (wind-tunnel or wind-tunnel-3d)
-template <class Exec>
-std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
-  if (r.kind == kind_name<3>()) return make_dim<3>(std::move(ex), r);
-  return make_dim<2>(std::move(ex), r);
-}
-
-template <class Exec>
-double bytes(const SimRequest& r) {
-  if (r.kind == kind_name<3>()) {
-    auto m = std::make_unique<Model<3>>(build_model<3>(*r.params, r.arrays));
-    return Pipeline<Exec, GridIndex, 3>::bytes_needed(*m);
+// the kind of dimension D (wind-tunnel, wind-tunnel-3d) in the list of kinds (sim/kinds.h)
+template <int D>
+struct Entry {
+  static constexpr const char* name = kind_name<D>();
+  using Indexes = wt::Indexes;
+  template <class Exec>
+  static std::unique_ptr<Sim> make(Exec&& ex, const SimRequest& r) {
+    return Indexes::with(name, r.index, [&](auto index) {
+      return make_with<Exec, decltype(index), D>(std::move(ex), r);
+    });
   }
-  auto m = std::make_unique<Model<2>>(build_model<2>(*r.params, r.arrays));
-  return Pipeline<Exec, GridIndex, 2>::bytes_needed(*m);
-}
+  template <class Exec>
+  static double bytes(const SimRequest& r) {
+    auto m = std::make_unique<Model<D>>(build_model<D>(*r.params, r.arrays));
+    return Indexes::with(name, r.index, [&](auto index) {
+      return Pipeline<Exec, decltype(index), D>::bytes_needed(*m);
+    });
+  }
+};
 
 }  // namespace cps::wt
