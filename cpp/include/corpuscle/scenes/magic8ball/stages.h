@@ -3,6 +3,7 @@
 #pragma once
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/lanes.h"
+#include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/grid.h"
 #include "corpuscle/spatial/lane_walks.h"
 #include "corpuscle/scenes/magic8ball/model.h"
@@ -304,17 +305,23 @@ struct PairWalk {
   CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
                                const Lanes& L, int* list) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    const int count = list_in_range(L, grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, grid.spec.h2, list,
-                                      m.max_neighbors, 0);
-    return list_in_range(L, grid.pos, ghosts, ghosts + g->n_ghost, x, grid.spec.h2, list, m.max_neighbors, count);
+    const AllPairsView<D> all = every_slot(m, grid, grid.spec.h2);
+    const int count = all.list_range(L, s * n, s * n + (Many ? g->phys.n_active : n), x, list, m.max_neighbors, 0);
+    return all.list_range(L, ghosts, ghosts + g->n_ghost, x, list, m.max_neighbors, count);
   }
   // every fluid particle of i's scene, then its ghosts
   template <class Lanes, class V>
   CPS_HD static int all_pairs(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
                               const Lanes& L, V& v) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    return for_each_in_range(L, grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, m.kern.support2(), v) +
-           for_each_in_range(L, grid.pos, ghosts, ghosts + g->n_ghost, x, m.kern.support2(), v);
+    const AllPairsView<D> all = every_slot(m, grid, m.kern.support2());
+    return all.gather_range(L, s * n, s * n + (Many ? g->phys.n_active : n), x, v) +
+           all.gather_range(L, ghosts, ghosts + g->n_ghost, x, v);
+  }
+  // the all-pairs view of every slot of the state (fluid and ghosts of every scene), queried
+  // with squared radius r2; a particle walks its own scene's ranges of it
+  CPS_HD static AllPairsView<D> every_slot(const Model& m, const GridView<D>& grid, float r2) {
+    return AllPairsView<D>{grid.pos, 2 * Scenes<Many>::fluid(m), r2};
   }
   template <class Lanes, class V>
   CPS_HD static void forces(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
