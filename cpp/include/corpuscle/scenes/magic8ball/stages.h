@@ -6,6 +6,7 @@
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/grid.h"
 #include "corpuscle/spatial/lane_walks.h"
+#include "corpuscle/spatial/neighbor_list.h"
 #include "corpuscle/scenes/magic8ball/model.h"
 
 namespace cps::m8 {
@@ -284,13 +285,12 @@ struct PairWalk {
                              const Vec3& x, const Lanes& L, V& v, int& count, int& kept) {
     NoVisit none;
     if constexpr (Index::lists) {
-      int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
+      const RowLists lists = listed(m, a), near = nearby(m, a);
+      int* list = lists.row(i);
       if (!rebuilding(m, g)) count = a.nbr_count[i];
       else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
       else count = for_each_neighbor_listing(L, grid, x, true, none, list, m.max_neighbors);
-      int* near = a.near + size_t(i) * size_t(m.max_near);
-      kept = for_each_listed_compacting(L, list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
-                                          m.kern.support2(), near, m.max_near);
+      kept = lists.walk_compacting(L, i, count, grid.pos, x, v, m.kern.support2(), near);
     } else if constexpr (Index::cells) {
       kept = count = for_each_neighbor_listing(L, grid, x, true, v, nullptr, 0);
     } else {
@@ -318,6 +318,10 @@ struct PairWalk {
     return all.gather_range(L, s * n, s * n + (Many ? g->phys.n_active : n), x, v) +
            all.gather_range(L, ghosts, ghosts + g->n_ghost, x, v);
   }
+  // the lists: every neighbour within the list radius (rebuilds), and those of them within h
+  // (every step, for the force stage)
+  CPS_HD static RowLists listed(const Model& m, const Arrays& a) { return RowLists{a.nbr, a.nbr_count, m.max_neighbors}; }
+  CPS_HD static RowLists nearby(const Model& m, const Arrays& a) { return RowLists{a.near, a.near_count, m.max_near}; }
   // the all-pairs view of every slot of the state (fluid and ghosts of every scene), queried
   // with squared radius r2; a particle walks its own scene's ranges of it
   CPS_HD static AllPairsView<D> every_slot(const Model& m, const GridView<D>& grid, float r2) {
@@ -327,9 +331,7 @@ struct PairWalk {
   CPS_HD static void forces(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
                             const Vec3& x, const Lanes& L, V& fv) {
     if constexpr (Index::lists) {
-      int count = a.near_count[i];
-      for_each_listed(L, a.near + size_t(i) * size_t(m.max_near), count < m.max_near ? count : m.max_near, grid.pos,
-                        x, fv);
+      nearby(m, a).walk(L, i, grid.pos, x, fv);
     } else if constexpr (Index::cells) {
       for_each_neighbor_listing(L, grid, x, true, fv, nullptr, 0);
     } else {
