@@ -41,26 +41,26 @@ void bind_init(nb::module_& m) {
       "Poisson-disk samples (count, 3) inside a sphere, outside a box; returns (positions, spacing).");
 }
 
-#include "corpuscle/physics/sph_kernels.h"
+#include "corpuscle/physics/sph_kernel_families.h"
 
 // the SPH kernels evaluated at displacement vectors d (n, 3), for the kernel tests
 void bind_kernels(nb::module_& m) {
   m.def(
       "sph_kernels",
       [](float h, nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu> d) {
-        auto k = SphKernels<3>::make(h);
+        auto k = MuellerKernels<3>::make(h);
         size_t n = d.shape(0);
         auto* out = new float[n * 6];
         for (size_t i = 0; i < n; ++i) {
           Vec3 v{{d(i, 0), d(i, 1), d(i, 2)}};
           float r2 = norm2(v), r = std::sqrt(r2);
-          Vec3 g = k.spiky_grad(v, r);
-          out[6 * i + 0] = k.poly6(r2);
+          Vec3 g = k.spiky.grad(v, r);
+          out[6 * i + 0] = k.poly6.w_r2(r2);
           out[6 * i + 1] = g[0];
           out[6 * i + 2] = g[1];
           out[6 * i + 3] = g[2];
-          out[6 * i + 4] = k.visc_lap(r);
-          out[6 * i + 5] = k.poly6_beyond_plane(v[2]);
+          out[6 * i + 4] = k.visc.lap(r);
+          out[6 * i + 5] = KernelFormula<3, SphKernelKind::Poly6>::beyond_plane(k.poly6.k, v[2]);
         }
         nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<float*>(p); });
         return nb::ndarray<nb::numpy, float, nb::shape<-1, 6>>(out, {n, 6}, owner);

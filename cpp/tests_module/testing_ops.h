@@ -14,6 +14,7 @@
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/error.h"
 #include "corpuscle/core/lanes.h"
+#include "corpuscle/spatial/lane_walks.h"
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/cell_grid.h"
 #include "corpuscle/spatial/neighbor_list.h"
@@ -252,7 +253,7 @@ struct LanesGather {
   CPS_HD void operator()(int i, const Lanes& L) const {
     float s = 0.0f;
     auto visit = [&](int, const Vec3&, float r2) { s += r2; };
-    int c = L.for_each_in_range(pos, 0, n, pos[i], r2max, visit);
+    int c = for_each_in_range(L, pos, 0, n, pos[i], r2max, visit);
     s = L.sum(s);
     if (!L.leader()) return;
     sums[i] = s;

@@ -172,7 +172,8 @@ class Batch:
         kinds = dict(_core().kinds())
         self.neighbors = kinds["magic8ball"][0] if neighbors is None else str(neighbors)
         if self.neighbors not in kinds["magic8ball"]:
-            raise ValueError(f"--neighbors must be one of {', '.join(kinds['magic8ball'])}, got {self.neighbors!r}")
+            raise ValueError(f"--neighbors must be one of {', '.join(kinds['magic8ball'])} (the indexes of magic8ball), "
+                             f"got {self.neighbors!r}")
         self.device = _count("device", device)
         if self.device and self.backend != "cuda":
             raise ValueError(f"--device {self.device}: selects a CUDA device; the {self.backend} backend has none "

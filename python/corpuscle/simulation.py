@@ -148,7 +148,8 @@ class Simulation:
         self.kind = kind
         self.neighbors = kinds[scene.kind][0] if neighbors is None else str(neighbors)
         if self.neighbors not in kinds[scene.kind]:
-            raise ValueError(f"--neighbors must be one of {', '.join(kinds[scene.kind])}, got {self.neighbors!r}")
+            raise ValueError(f"--neighbors must be one of {', '.join(kinds[scene.kind])} (the indexes of {scene.kind}), "
+                             f"got {self.neighbors!r}")
         self.device = _count("device", device)
         if self.device and self.backend != "cuda":
             raise ValueError(f"--device {self.device}: selects a CUDA device; the {self.backend} backend has none "

@@ -4,7 +4,8 @@ Wendland C2 with the Dehnen & Aly 2012 constants), in 2-D and 3-D, evaluated thr
 ``corpuscle._testing.sph_kernel`` and checked against float64 NumPy: normalisation by
 quadrature, gradient against finite differences, zero gradient sum on a symmetric lattice,
 positivity and compact support, continuity, the published closed forms, and bit-identity of
-the 3-D Poly6 / Spiky / viscosity Laplacian with the Magic 8-Ball's SphKernels<3>.
+the 3-D Poly6 / Spiky / viscosity Laplacian chosen at run time with the Magic 8-Ball's
+MuellerKernels<3> (chosen at compile time).
 
 Convention under test: h is the support radius for every kernel (W = 0 for r >= h); the
 closed forms below are written in each paper's own variables (Monaghan's smoothing length
@@ -327,9 +328,8 @@ def test_compile_time_and_run_time_selection_agree_bitwise(kernel, dim):
 
 @pytest.mark.parametrize("h", H_VALUES)
 def test_3d_muller_set_bitwise_equal_to_magic8ball_kernels(h):
-    # the new Poly6 (from r^2), Spiky gradient and viscosity Laplacian
-    # reproduce SphKernels<3> (corpuscle._core.sph_kernels) bit for bit, so the 8-ball could
-    # switch to them without changing a result
+    # the run-time selected Poly6 (from r^2), Spiky gradient and viscosity Laplacian equal the
+    # 8-ball's compile-time set MuellerKernels<3> (corpuscle._core.sph_kernels) bit for bit
     d = random_inside(3, h, 2000, seed=8, lo=0.0, hi=1.1).astype(np.float32)
     old = np.asarray(core.sph_kernels(float(h), d), dtype=np.float64)
     w, _, _ = evaluate("poly6", 3, h, d, from_r2=True)

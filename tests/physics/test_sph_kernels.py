@@ -1,4 +1,4 @@
-"""SPH kernels of the core (cpp/include/corpuscle/physics/sph_kernels.h), evaluated through
+"""The Magic 8-Ball's SPH kernels (MuellerKernels<3> of cpp/include/corpuscle/physics/sph_kernel_families.h), evaluated through
 ``corpuscle._core.sph_kernels`` and checked against independent float64 NumPy mathematics:
 Poly6 normalisation, the Spiky gradient against a finite difference of the Spiky kernel,
 zero gradient sum over a symmetric neighbourhood, the viscosity Laplacian, and the Poly6

@@ -124,7 +124,7 @@ def test_settled_density_is_near_rest(still):
 
 def test_die_stays_in_still_fluid_at_coarse_resolution(still):
     # At 1000 particles h = 0.076 m exceeds the die's side: the density renormalisation at the
-    # die must shrink with the box (SphKernels::box_fraction) or the die floats to the top (it
+    # die must shrink with the box (Poly6's box_fraction) or the die floats to the top (it
     # rose 5-9 cm with a plane-based cut). Measured for seeds 1-10: dz = -0.35 to -0.92 cm at
     # 1 s, -0.61 to -0.99 cm at 1.5 s (seed 1: -0.92, -0.88); bound -1.5 cm (1.5x the largest)
     # and the settling bound of assert_die_settles_with_the_fluid (-0.12 cm). A die 50% heavier

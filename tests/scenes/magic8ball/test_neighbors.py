@@ -30,7 +30,7 @@ def test_every_index_is_registered_with_lists_first():
     kinds = _core.kinds()
     assert kinds["magic8ball"] == INDEXES
     assert make(None).neighbors == "lists"
-    with pytest.raises(ValueError, match=r"--neighbors must be one of lists, grid, allpairs, got 'octree'"):
+    with pytest.raises(ValueError, match=r"--neighbors must be one of lists, grid, allpairs \(the indexes of magic8ball\), got 'octree'"):
         make("octree")
 
 

@@ -1,7 +1,7 @@
 // Weakly compressible SPH: Tait equation of state and the pair visitors for density and
 // forces. Each visitor is called by a spatial query (for_each_neighbor) for one particle i.
 #pragma once
-#include "corpuscle/physics/sph_kernels.h"
+#include "corpuscle/physics/sph_kernel_families.h"
 #include "corpuscle/physics/tait.h"
 
 namespace cps {
@@ -31,9 +31,9 @@ CPS_HD CPS_INLINE float tait_sound_speed(const SphParams& p) {
 // density: rho_i = m W(0) + sum_j m W(|x_ij|^2), fluid and ghost neighbours
 template <int D>
 struct DensityVisitor {
-  const SphKernels<D>& k;
+  const MuellerKernels<D>& k;
   float sum = 0.0f;
-  CPS_HD void operator()(int, const Vec<D>&, float r2) { sum += k.poly6(r2); }
+  CPS_HD void operator()(int, const Vec<D>&, float r2) { sum += k.poly6.w_r2(r2); }
 };
 
 // finish the density sum (self term is part of the neighbour sum: j == i has r2 = 0)
@@ -58,7 +58,7 @@ struct alignas(8) ForceTerms {
 
 template <int D>
 struct ForceVisitor {
-  const SphKernels<D>& k;
+  const MuellerKernels<D>& k;
   const SphParams& p;
   const Vec<D>* vel;
   const float* rho;
@@ -71,7 +71,7 @@ struct ForceVisitor {
   Vec<D> acc_v = Vec<D>::zero();
   Vec<D> dv_xsph = Vec<D>::zero();
 
-  CPS_HD ForceVisitor(const SphKernels<D>& k_, const SphParams& p_, const Vec<D>* vel_, const float* rho_,
+  CPS_HD ForceVisitor(const MuellerKernels<D>& k_, const SphParams& p_, const Vec<D>* vel_, const float* rho_,
                       const ForceTerms* terms_, int i_, int n_fluid_)
       : k(k_), p(p_), vel(vel_), rho(rho_), terms(terms_), i(i_), n_fluid(n_fluid_) {
     vi = vel[i];
@@ -88,11 +88,11 @@ struct ForceVisitor {
     Vec<D> dv = vel[j] - vi;
     // symmetric pressure term
     float pterm = pterm_i + tj.pterm;
-    acc_p -= k.spiky_grad(d, r, rinv) * pterm;
+    acc_p -= k.spiky.grad_rinv(d, r, rinv) * pterm;
     // viscosity (the 1/rho_i factor is applied in acceleration())
-    acc_v += dv * (k.visc_lap(r) * tj.inv_rho);
+    acc_v += dv * (k.visc.lap(r) * tj.inv_rho);
     // XSPH velocity smoothing over fluid neighbours only
-    if (j < n_fluid) dv_xsph += dv * (k.poly6(r2) * 2.0f / (rho_i + rho_j));
+    if (j < n_fluid) dv_xsph += dv * (k.poly6.w_r2(r2) * 2.0f / (rho_i + rho_j));
   }
 
   // combine the partial sums of cooperating lanes

@@ -1,7 +1,7 @@
 // Selectable SPH smoothing kernels, generic in the dimension D (2 or 3), each with W(r), its
 // gradient with respect to x_i for d = x_i - x_j, and the normalisation of its dimension.
 //
-// Convention (one for every kernel here, and the same as sph_kernels.h): h is the SUPPORT
+// Convention (one for every kernel here): h is the SUPPORT
 // RADIUS, W(r) = 0 for r >= h, and q = r / h. Papers written with a smoothing length s and
 // support 2s (Monaghan 1992's cubic spline; DualSPHysics's "h" for both cubic and Wendland)
 // map onto this with h = 2 s; Dehnen & Aly (2012, Table 1) already use the support radius
@@ -10,14 +10,14 @@
 //   Poly6       W = c (h^2 - r^2)^3                 c3 = 315 / (64 pi h^9), c2 = 4 / (pi h^8)
 //               (Mueller, Charypar & Gross 2003, eq. 20; the 2-D constant by normalising over
 //               the disc: int_0^h (h^2 - r^2)^3 2 pi r dr = pi h^8 / 4. The seed's original
-//               had a typo in this constant; sph_kernels.h and this file use the correct one.)
+//               had a typo in this constant; this file uses the correct one.)
 //   Spiky       W = c (h - r)^3                     c3 = 15 / (pi h^6),      c2 = 10 / (pi h^5)
 //               (Mueller 2003, eq. 21; 2-D: int_0^h (h - r)^3 2 pi r dr = pi h^5 / 10)
 //   Viscosity   3-D: W = c (-r^3 / 2h^3 + r^2 / h^2 + h / 2r - 1) = c (1 - q)^3 (1 + q) / 2q, c = 15 / (2 pi h^3),
 //               lap W = 45 / (pi h^6) (h - r) (Mueller 2003, eq. 22).
 //               2-D: the radial kernel whose 2-D Laplacian is k (h - r) with W(h) = W'(h) = 0,
 //               normalised over the disc: W = k (h r^2 / 4 - r^3 / 9 - 5 h^3 / 36 - h^3 / 6 ln(r/h)),
-//               k = 40 / (pi h^5), lap W = k (h - r) (the constant sph_kernels.h uses in 2-D).
+//               k = 40 / (pi h^5), lap W = k (h - r).
 //               Both are singular (integrably) at r = 0; W(0) returns 0 there by convention.
 //   CubicSpline W = sigma / h^D f(q), f = 1 - 6 q^2 + 6 q^3 (q < 1/2), 2 (1 - q)^3 (1/2 <= q < 1),
 //               sigma3 = 8 / pi, sigma2 = 40 / (7 pi)
@@ -66,7 +66,6 @@ struct KernelFormula<D, SphKernelKind::Poly6> {
     k.inv_h = 1.0f / h;
     k.h2 = h * h;
     float h4 = k.h2 * k.h2;
-    // evaluated as in SphKernels<D>::make, so W(r^2) agrees with it bit for bit
     if constexpr (D == 3) k.c = 315.0f / (64.0f * kPi * h4 * h4 * h);
     else k.c = 4.0f / (kPi * h4 * h4);
     k.gc = -6.0f * k.c;
@@ -84,6 +83,28 @@ struct KernelFormula<D, SphKernelKind::Poly6> {
     float t = k.h2 - r * r;
     return d * (k.gc * t * t);
   }
+  // fraction of the kernel's mass beyond a plane at signed distance d from the particle
+  // (d > 0: plane outside the particle), 3-D: Gamma(s) = 1/2 - 315/256 F(s), s = d/h, with
+  // F(s) = s - 4 s^3/3 + 6 s^5/5 - 4 s^7/7 + s^9/9 the antiderivative of (1 - s^2)^4
+  CPS_HD static float beyond_plane(const SphKernelConsts& k, float d) {
+    static_assert(D == 3, "the half-space fraction is derived for 3-D Poly6");
+    float s = fclamp(d / k.h, -1.0f, 1.0f);
+    float s2 = s * s;
+    float F = s * (1.0f + s2 * (-4.0f / 3.0f + s2 * (6.0f / 5.0f + s2 * (-4.0f / 7.0f + s2 / 9.0f))));
+    return 0.5f - (315.0f / 256.0f) * F;
+  }
+  // fraction of the kernel's mass inside an axis-aligned box [-half, half] for a particle at p
+  // (box frame): the product over axes of the kernel's 1-D marginal mass in the box's slab.
+  // Exact for a single face (a plane) and smooth across edges and corners; for a box smaller
+  // than the kernel it shrinks with the box instead of saturating at the plane's 1/2.
+  CPS_HD static float box_fraction(const SphKernelConsts& k, const Vec<D>& half, const Vec<D>& p) {
+    float f = 1.0f;
+    for (int a = 0; a < D; ++a) {
+      // 1 minus the marginal mass beyond the upper face and beyond the lower face
+      f *= 1.0f - beyond_plane(k, half[a] - p[a]) - beyond_plane(k, half[a] + p[a]);
+    }
+    return f;
+  }
 };
 
 // ---- Spiky ----
@@ -97,10 +118,10 @@ struct KernelFormula<D, SphKernelKind::Spiky> {
     float h4 = k.h2 * k.h2;
     if constexpr (D == 3) {
       k.c = 15.0f / (kPi * h4 * k.h2);
-      k.gc = 45.0f / (kPi * h4 * k.h2);  // as SphKernels<3>::spiky_c (3 c)
+      k.gc = 45.0f / (kPi * h4 * k.h2);  // 3 c
     } else {
       k.c = 10.0f / (kPi * h4 * h);
-      k.gc = 30.0f / (kPi * h4 * h);  // as SphKernels<2>::spiky_c (3 c)
+      k.gc = 30.0f / (kPi * h4 * h);  // 3 c
     }
     return k;
   }
@@ -109,11 +130,18 @@ struct KernelFormula<D, SphKernelKind::Spiky> {
     float t = k.h - r;
     return k.c * t * t * t;
   }
-  // grad W = -3 c (h - r)^2 d / r, written as SphKernels<D>::spiky_grad (bit for bit)
+  // grad W = -3 c (h - r)^2 d / r
   CPS_HD static Vec<D> grad(const SphKernelConsts& k, const Vec<D>& d, float r) {
     if (r >= k.h || r <= 0.0f) return Vec<D>::zero();
     float t = k.h - r;
     return d * fdiv_fast(-k.gc * t * t, r);
+  }
+  // the same with 1 / r given (a product, no division: the pair loop has 1 / r from one
+  // reciprocal square root)
+  CPS_HD static Vec<D> grad_rinv(const SphKernelConsts& k, const Vec<D>& d, float r, float rinv) {
+    if (r >= k.h || r <= 0.0f) return Vec<D>::zero();
+    float t = k.h - r;
+    return d * (-k.gc * t * t * rinv);
   }
 };
 
@@ -128,7 +156,7 @@ struct KernelFormula<D, SphKernelKind::Viscosity> {
     float h4 = k.h2 * k.h2;
     if constexpr (D == 3) {
       k.c = 15.0f / (2.0f * kPi * k.h2 * h);
-      k.gc = 45.0f / (kPi * h4 * k.h2);  // the Laplacian's constant, as SphKernels<3>::visc_lap_c
+      k.gc = 45.0f / (kPi * h4 * k.h2);  // the Laplacian's constant
     } else {
       k.c = 40.0f / (kPi * h4 * h);  // k: W and lap W share it in 2-D
       k.gc = k.c;
@@ -166,7 +194,7 @@ struct KernelFormula<D, SphKernelKind::Viscosity> {
       return d * fdiv_fast(-k.c * t * t * (h + 2.0f * r), 6.0f * r * r);
     }
   }
-  // lap W = gc (h - r), as SphKernels<D>::visc_lap
+  // lap W = gc (h - r)
   CPS_HD static float lap(const SphKernelConsts& k, float r) { return r >= k.h ? 0.0f : k.gc * (k.h - r); }
 };
 
@@ -243,6 +271,30 @@ struct Kernel {
     else return F::w(k, fsqrt(r2));
   }
   CPS_HD Vec<D> grad(const Vec<D>& d, float r) const { return F::grad(k, d, r); }
+  // the forms one kernel has: Spiky's gradient with 1 / r given, the viscosity kernel's
+  // Laplacian, Poly6's mass inside a box
+  CPS_HD Vec<D> grad_rinv(const Vec<D>& d, float r, float rinv) const { return F::grad_rinv(k, d, r, rinv); }
+  CPS_HD float lap(float r) const { return F::lap(k, r); }
+  CPS_HD float box_fraction(const Vec<D>& half, const Vec<D>& p) const { return F::box_fraction(k, half, p); }
+};
+
+// Mueller, Charypar & Gross (2003)'s three kernels of one support h: Poly6 for the density
+// (and XSPH), Spiky's gradient for the pressure, the viscosity kernel's Laplacian for the
+// viscosity (the Magic 8-Ball's set)
+template <int D>
+struct MuellerKernels {
+  Kernel<D, SphKernelKind::Poly6> poly6;
+  Kernel<D, SphKernelKind::Spiky> spiky;
+  Kernel<D, SphKernelKind::Viscosity> visc;
+  CPS_HD static MuellerKernels make(float h) {
+    MuellerKernels s;
+    s.poly6 = Kernel<D, SphKernelKind::Poly6>::make(h);
+    s.spiky = Kernel<D, SphKernelKind::Spiky>::make(h);
+    s.visc = Kernel<D, SphKernelKind::Viscosity>::make(h);
+    return s;
+  }
+  CPS_HD float support() const { return poly6.k.h; }
+  CPS_HD float support2() const { return poly6.k.h2; }
 };
 
 // a kernel chosen at run time: a kind code and the constants (a POD for device code)
@@ -290,7 +342,7 @@ struct SphKernel {
 };
 
 // the kernels one SPH model uses: one for density (and interpolation), one for gradients.
-// The seed's set is {Poly6, Spiky} (with the viscosity kernel's Laplacian, SphKernels<D>);
+// The seed's set is {Poly6, Spiky} (with the viscosity kernel's Laplacian: MuellerKernels<D>);
 // the cubic spline and Wendland models use one kernel for both.
 template <int D>
 struct SphKernelSet {

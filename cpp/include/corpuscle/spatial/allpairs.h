@@ -5,8 +5,11 @@
 // tiled form (gather_stage_tiled) runs a begin / visit / end stage with blocks of kTile
 // threads that load tiles of kTile positions into shared memory, every thread of the block
 // then scanning the tile: the same visits in the same order as gather, so the same results.
+// gather_range and list_range walk a part of the slots by cooperating lanes (a particle's
+// scene of a batch, or its ghosts: the Magic 8-Ball's all pairs and its lists' scan).
 #pragma once
 #include "corpuscle/spatial/index.h"
+#include "corpuscle/spatial/lane_walks.h"
 
 namespace cps {
 
@@ -42,6 +45,18 @@ struct AllPairsView {
       float rr = norm2(d);
       if (rr < r2) visit(j, d, rr);
     }
+  }
+  // gather's visits restricted to slots [begin, end), by lanes (core/lanes.h: the CPU's one
+  // lane, or W lanes of a warp striding the slots); returns how many there were (every lane)
+  template <class Lanes, class Visit>
+  CPS_HD int gather_range(const Lanes& L, int begin, int end, const Vec<D>& xi, Visit& visit) const {
+    return for_each_in_range(L, pos, begin, end, xi, r2, visit);
+  }
+  // list the slots of [begin, end) that gather_range visits after the `count` already listed
+  // (up to cap), in index order; returns the new count (the true one, past cap)
+  template <class Lanes>
+  CPS_HD int list_range(const Lanes& L, int begin, int end, const Vec<D>& xi, int* list, int cap, int count) const {
+    return list_in_range(L, pos, begin, end, xi, r2, list, cap, count);
   }
 };
 

@@ -10,6 +10,7 @@
 // radius. Other indexes (all-pairs, neighbour lists, LBVH) implement the same call so the
 // physics visitors never change.
 #pragma once
+#include "corpuscle/core/lanes.h"
 #include "corpuscle/core/vec.h"
 #include "corpuscle/spatial/morton.h"
 
@@ -95,7 +96,7 @@ CPS_HD CPS_INLINE bool stencil_slot(const GridSpec<D>& g, const int* c, int o, i
 }
 
 // visit every particle of the chosen layers within the support radius of xi (one thread;
-// core/lanes.h has the cooperative form a warp uses)
+// for_each_neighbor_listing below has the cooperative form a warp uses)
 template <int D, class Visitor>
 CPS_HD CPS_INLINE void for_each_neighbor(const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit) {
   int c[D];
@@ -126,5 +127,75 @@ CPS_HD CPS_INLINE void mark_cell_range(const GridSpec<D>& g, const uint32_t* key
   if (j == 0 || keys[j - 1] != k) start[slot] = uint32_t(j);
   if (j == n - 1 || keys[j + 1] != k) end[slot] = uint32_t(j + 1);
 }
+
+// the cell walk by lanes (core/lanes.h): every particle of the chosen layers within the
+// support radius of xi, visited and listed (up to cap; returns how many there were)
+// the plain cell-by-cell neighbour loop, listing the neighbours (up to cap; returns how
+// many there were)
+template <int D, class Visitor>
+CPS_HD int for_each_neighbor_listing(const SingleLane&, const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
+                                     int* list, int cap) {
+  int count = 0;
+  auto listing = [&](int j, const Vec<D>& d, float r2) {
+    if (count < cap) list[count] = j;
+    ++count;
+    visit(j, d, r2);
+  };
+  cps::for_each_neighbor(g, xi, ghosts, listing);
+  return count;
+}
+
+#ifdef __CUDACC__
+// cell range of stencil slot k (layer k / stencil, offset k % stencil), empty outside the grid
+template <int D>
+__device__ void load_range(const GridView<D>& g, const int* c, int k, int nslots, uint32_t& s, uint32_t& e) {
+  uint32_t slot;
+  if (k >= nslots || !stencil_slot(g.spec, c, k % kStencil<D>, k / kStencil<D>, slot)) return;
+  s = g.cell_start[slot];
+  e = g.cell_end[slot];
+}
+
+// the cell walk (WarpLanes': W = 32): the lanes load the ranges of W stencil cells at once
+// (lane l: cell k0 + l), then walk those cells with the ranges broadcast by shuffles, each
+// lane taking every W-th candidate of a cell. Neighbours are listed in the serial loop's
+// order (the stencil's cells of the fluid layer, then of the ghost layer; ascending index in
+// each: a ballot keeps lane order), up to cap; returns how many there were (on every lane)
+template <int W, int D, class Visitor>
+__device__ int for_each_neighbor_listing(const SubWarpLanes<W>& L, const GridView<D>& g, const Vec<D>& xi, bool ghosts, Visitor& visit,
+                                         int* list, int cap) {
+  const int nslots = kStencil<D> * (ghosts ? 2 : 1);
+  int c[D];
+  g.spec.cell_of(xi, c);
+  const unsigned below = (1u << L.lane()) - 1u;
+  int count = 0;
+  for (int k0 = 0; k0 < nslots; k0 += W) {
+    uint32_t sl = 0, el = 0;  // the range of stencil cell k0 + lane
+    load_range(g, c, k0 + L.lane(), nslots, sl, el);
+    const int kn = nslots - k0 < W ? nslots - k0 : W;
+    for (int q = 0; q < kn; ++q) {
+      const uint32_t s = __shfl_sync(L.mask(), sl, q, W), e = __shfl_sync(L.mask(), el, q, W);
+      for (uint32_t b = s; b < e; b += uint32_t(W)) {
+        const uint32_t j = b + uint32_t(L.lane());
+        Vec<D> d = Vec<D>::zero();
+        float r2 = 0.0f;
+        bool hit = false;
+        if (j < e) {
+          d = xi - g.pos[j];
+          r2 = norm2(d);
+          hit = r2 < g.spec.h2;
+        }
+        const unsigned m = L.group_ballot(hit);
+        if (hit) {
+          const int at = count + __popc(m & below);
+          if (at < cap) list[at] = int(j);
+          visit(int(j), d, r2);
+        }
+        count += __popc(m);
+      }
+    }
+  }
+  return count;
+}
+#endif
 
 }  // namespace cps

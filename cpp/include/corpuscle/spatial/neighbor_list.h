@@ -18,6 +18,13 @@
 // graph and be skipped by a device flag): a slot with more neighbours than the capacity stores
 // the first `capacity`, counts them all and raises an overflow code; the host then grows the
 // capacity to the largest count and repeats the step (the engine's fixed-capacity rule).
+//
+// Row lists (RowLists, below) are the fixed-capacity form for W lanes sharing one slot's list
+// (a warp per particle): slot i's entries lie in one row, nbr[i * capacity + k], so the lanes
+// read consecutive entries. They are filled by any walk that lists (the cell walk by lanes, an
+// all-pairs scan of a range), in its order, the slot itself included, and a shorter row list
+// can keep the entries of another within a smaller radius (walk_compacting); the same
+// overflow rule holds (the counts are the true ones; the owner grows and repeats).
 #pragma once
 #include <algorithm>
 #include <string>
@@ -27,6 +34,7 @@
 #include "corpuscle/core/error.h"
 #include "corpuscle/core/lanes.h"
 #include "corpuscle/spatial/index.h"
+#include "corpuscle/spatial/lane_walks.h"
 
 namespace cps {
 
@@ -401,6 +409,34 @@ class SlotNeighborList {
   size_t stride_ = 1;
   float list_radius_ = 0.0f;
   Buffer<int> nbr_, counts_;
+};
+
+// ---- row lists: fixed capacity, entry k of slot i at nbr[i * capacity + k] ----
+
+struct RowLists {
+  int* nbr = nullptr;    // rows of `capacity` entries, one a slot
+  int* count = nullptr;  // one a slot: the entries found (may exceed capacity: overflow)
+  int capacity = 0;
+
+  CPS_HD int* row(int i) const { return nbr + size_t(i) * size_t(capacity); }
+  // the entries row i holds (its count, at most the capacity)
+  CPS_HD int stored(int c) const { return c < capacity ? c : capacity; }
+  CPS_HD int listed(int i) const { return stored(count[i]); }
+
+  // visit slot i's listed entries by lanes (spatial/lane_walks.h): visit(j, xi - pos[j], r2)
+  // for each, in the row's order, with no radius check (the row holds what its fill kept)
+  template <class Lanes, int D, class Visit>
+  CPS_HD void walk(const Lanes& L, int i, const Vec<D>* pos, const Vec<D>& xi, Visit& visit) const {
+    for_each_listed(L, row(i), listed(i), pos, xi, visit);
+  }
+  // the same over the first c entries (c: the true count of a listing just made, not yet
+  // stored), copying those closer than sqrt(r2) to row i of `out` in order; returns how many
+  // there were (the true count, past out's capacity)
+  template <class Lanes, int D, class Visit>
+  CPS_HD int walk_compacting(const Lanes& L, int i, int c, const Vec<D>* pos, const Vec<D>& xi, Visit& visit,
+                             float r2, const RowLists& out) const {
+    return for_each_listed_compacting(L, row(i), stored(c), pos, xi, visit, r2, out.row(i), out.capacity);
+  }
 };
 
 }  // namespace cps

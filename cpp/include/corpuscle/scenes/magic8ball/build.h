@@ -39,7 +39,7 @@ inline Model build_model(const ParamSource& p) {
   if (m.n_scenes < 1 || (long long)m.n_scenes * m.n_fluid > (1LL << 29))
     throw Error("magic8ball: n_scenes must be at least 1 and n_scenes * n_fluid at most 2^29");
   m.h = p.f("h");
-  m.kern = SphKernels<D>::make(m.h);
+  m.kern = MuellerKernels<D>::make(m.h);
   m.max_neighbors = int(p.integer("max_neighbors"));
   m.max_near = int(p.integer("max_near"));
   m.max_list_bytes = p.has("max_list_bytes") ? p.number("max_list_bytes") : 0.0;

@@ -38,7 +38,7 @@ struct Model {
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float skin_distance;   // list_radius - h: how far pairs may close in before the lists are stale (0: every step)
   float h;               // smoothing length
-  SphKernels<D> kern;
+  MuellerKernels<D> kern;  // Poly6, Spiky, viscosity (physics/sph_kernel_families.h)
   SphereWall wall;
   float shell_inertia;   // kg m^2
   float spin_damping;    // 1/s

@@ -3,6 +3,10 @@
 #pragma once
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/lanes.h"
+#include "corpuscle/spatial/allpairs.h"
+#include "corpuscle/spatial/grid.h"
+#include "corpuscle/spatial/lane_walks.h"
+#include "corpuscle/spatial/neighbor_list.h"
 #include "corpuscle/scenes/magic8ball/model.h"
 
 namespace cps::m8 {
@@ -281,15 +285,14 @@ struct PairWalk {
                              const Vec3& x, const Lanes& L, V& v, int& count, int& kept) {
     NoVisit none;
     if constexpr (Index::lists) {
-      int* list = a.nbr + size_t(i) * size_t(m.max_neighbors);
+      const RowLists lists = listed(m, a), near = nearby(m, a);
+      int* list = lists.row(i);
       if (!rebuilding(m, g)) count = a.nbr_count[i];
       else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
-      else count = L.for_each_neighbor_listing(grid, x, true, none, list, m.max_neighbors);
-      int* near = a.near + size_t(i) * size_t(m.max_near);
-      kept = L.for_each_listed_compacting(list, count < m.max_neighbors ? count : m.max_neighbors, grid.pos, x, v,
-                                          m.kern.h2, near, m.max_near);
+      else count = for_each_neighbor_listing(L, grid, x, true, none, list, m.max_neighbors);
+      kept = lists.walk_compacting(L, i, count, grid.pos, x, v, m.kern.support2(), near);
     } else if constexpr (Index::cells) {
-      kept = count = L.for_each_neighbor_listing(grid, x, true, v, nullptr, 0);
+      kept = count = for_each_neighbor_listing(L, grid, x, true, v, nullptr, 0);
     } else {
       kept = count = all_pairs(m, g, grid, i, x, L, v);
     }
@@ -302,27 +305,35 @@ struct PairWalk {
   CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
                                const Lanes& L, int* list) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    const int count = L.list_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, grid.spec.h2, list,
-                                      m.max_neighbors, 0);
-    return L.list_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, grid.spec.h2, list, m.max_neighbors, count);
+    const AllPairsView<D> all = every_slot(m, grid, grid.spec.h2);
+    const int count = all.list_range(L, s * n, s * n + (Many ? g->phys.n_active : n), x, list, m.max_neighbors, 0);
+    return all.list_range(L, ghosts, ghosts + g->n_ghost, x, list, m.max_neighbors, count);
   }
   // every fluid particle of i's scene, then its ghosts
   template <class Lanes, class V>
   CPS_HD static int all_pairs(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
                               const Lanes& L, V& v) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    return L.for_each_in_range(grid.pos, s * n, s * n + (Many ? g->phys.n_active : n), x, m.kern.h2, v) +
-           L.for_each_in_range(grid.pos, ghosts, ghosts + g->n_ghost, x, m.kern.h2, v);
+    const AllPairsView<D> all = every_slot(m, grid, m.kern.support2());
+    return all.gather_range(L, s * n, s * n + (Many ? g->phys.n_active : n), x, v) +
+           all.gather_range(L, ghosts, ghosts + g->n_ghost, x, v);
+  }
+  // the lists: every neighbour within the list radius (rebuilds), and those of them within h
+  // (every step, for the force stage)
+  CPS_HD static RowLists listed(const Model& m, const Arrays& a) { return RowLists{a.nbr, a.nbr_count, m.max_neighbors}; }
+  CPS_HD static RowLists nearby(const Model& m, const Arrays& a) { return RowLists{a.near, a.near_count, m.max_near}; }
+  // the all-pairs view of every slot of the state (fluid and ghosts of every scene), queried
+  // with squared radius r2; a particle walks its own scene's ranges of it
+  CPS_HD static AllPairsView<D> every_slot(const Model& m, const GridView<D>& grid, float r2) {
+    return AllPairsView<D>{grid.pos, 2 * Scenes<Many>::fluid(m), r2};
   }
   template <class Lanes, class V>
   CPS_HD static void forces(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
                             const Vec3& x, const Lanes& L, V& fv) {
     if constexpr (Index::lists) {
-      int count = a.near_count[i];
-      L.for_each_listed(a.near + size_t(i) * size_t(m.max_near), count < m.max_near ? count : m.max_near, grid.pos,
-                        x, fv);
+      nearby(m, a).walk(L, i, grid.pos, x, fv);
     } else if constexpr (Index::cells) {
-      L.for_each_neighbor_listing(grid, x, true, fv, nullptr, 0);
+      for_each_neighbor_listing(L, grid, x, true, fv, nullptr, 0);
     } else {
       all_pairs(m, g, grid, i, x, L, fv);
     }
@@ -334,7 +345,7 @@ struct PairWalk {
 // within the list radius; every step the list is walked for the density and its entries
 // within h are copied to a short list for the force stage.
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
-// of the kernel (SphKernels::box_fraction), as if mirrored fluid filled the die, so the
+// of the kernel (Poly6's box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
 template <class Index, bool Many>
 struct DensityStage {
@@ -365,7 +376,7 @@ struct DensityStage {
       if (rebuild) a.nbr_count[i] = count;
     }
     if (rebuild) a.ghost_slot[i] = a.ghost_of[a.perm[i]];
-    float cut = m.kern.box_fraction(P.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
+    float cut = m.kern.poly6.box_fraction(P.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
     float rho = finish_density(P.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(P.sph, rho);
     const ForceTerms t = ForceTerms::of(rho, p);

@@ -1,0 +1,147 @@
+// Walks of a range of slots or of a neighbour list by cooperating lanes (core/lanes.h): the
+// all-pairs walk of a slot range, the listing of a range, the walk of a list and its
+// compaction to the entries within a smaller radius. One overload per kind of lanes: the
+// CPU's SingleLane (the plain serial loop) and CUDA's SubWarpLanes<W> (W lanes of a warp
+// stride the candidates; hits are listed in index order by a ballot, so a list comes out
+// the same on every backend). Each visit is visit(j, xi - x_j, r2).
+#pragma once
+#include "corpuscle/core/lanes.h"
+
+namespace cps {
+
+// visit every j in [begin, end) closer than sqrt(r2max) to xi (the all-pairs walk);
+// returns how many there were
+template <int D, class Visitor>
+CPS_HD int for_each_in_range(const SingleLane&, const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
+                             Visitor& visit) {
+  int count = 0;
+  for (int j = begin; j < end; ++j) {
+    Vec<D> d = xi - pos[j];
+    float r2 = norm2(d);
+    if (r2 < r2max) {
+      visit(j, d, r2);
+      ++count;
+    }
+  }
+  return count;
+}
+// list every j in [begin, end) closer than sqrt(r2max) to xi after the `count` already
+// listed (up to cap), in index order; returns the new count (the true one, past cap)
+template <int D>
+CPS_HD int list_in_range(const SingleLane&, const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list, int cap,
+                         int count) {
+  for (int j = begin; j < end; ++j) {
+    Vec<D> d = xi - pos[j];
+    if (norm2(d) < r2max) {
+      if (count < cap) list[count] = j;
+      ++count;
+    }
+  }
+  return count;
+}
+// visit the listed neighbours of xi
+template <int D, class Visitor>
+CPS_HD void for_each_listed(const SingleLane&, const int* list, int count, const Vec<D>* pos, const Vec<D>& xi, Visitor& visit) {
+  for (int e = 0; e < count; ++e) {
+    const int j = list[e];
+    Vec<D> d = xi - pos[j];
+    visit(j, d, norm2(d));
+  }
+}
+// visit the listed neighbours of xi and copy those closer than sqrt(r2max) to `out`, in
+// order (up to cap); returns how many there were
+template <int D, class Visitor>
+CPS_HD int for_each_listed_compacting(const SingleLane&, const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                      Visitor& visit, float r2max, int* out, int cap) {
+  int kept = 0;
+  for (int e = 0; e < count; ++e) {
+    const int j = list[e];
+    Vec<D> d = xi - pos[j];
+    float r2 = norm2(d);
+    visit(j, d, r2);
+    if (r2 < r2max) {
+      if (kept < cap) out[kept] = j;
+      ++kept;
+    }
+  }
+  return kept;
+}
+
+#ifdef __CUDACC__
+template <int W, int D, class Visitor>
+__device__ int for_each_in_range(const SubWarpLanes<W>& L, const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max,
+                                 Visitor& visit) {
+  int count = 0;
+  for (int b = begin; b < end; b += W) {
+    const int j = b + L.lane();
+    bool hit = false;
+    if (j < end) {
+      Vec<D> d = xi - pos[j];
+      float r2 = norm2(d);
+      hit = r2 < r2max;
+      if (hit) visit(j, d, r2);
+    }
+    count += __popc(L.group_ballot(hit));
+  }
+  return count;
+}
+
+// list_in_range's lanes: W candidates a round, hits listed in index order by a ballot
+template <int W, int D>
+__device__ int list_in_range(const SubWarpLanes<W>& L, const Vec<D>* pos, int begin, int end, const Vec<D>& xi, float r2max, int* list,
+                             int cap, int count) {
+  const unsigned below = (1u << L.lane()) - 1u;
+  for (int b = begin; b < end; b += W) {
+    const int j = b + L.lane();
+    bool hit = false;
+    if (j < end) {
+      Vec<D> d = xi - pos[j];
+      hit = norm2(d) < r2max;
+    }
+    const unsigned m = L.group_ballot(hit);
+    if (hit) {
+      const int at = count + __popc(m & below);
+      if (at < cap) list[at] = j;
+    }
+    count += __popc(m);
+  }
+  return count;
+}
+
+template <int W, int D, class Visitor>
+__device__ void for_each_listed(const SubWarpLanes<W>& L, const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                Visitor& visit) {
+  for (int e = L.lane(); e < count; e += W) {
+    const int j = list[e];
+    Vec<D> d = xi - pos[j];
+    visit(j, d, norm2(d));
+  }
+}
+
+template <int W, int D, class Visitor>
+__device__ int for_each_listed_compacting(const SubWarpLanes<W>& L, const int* list, int count, const Vec<D>* pos, const Vec<D>& xi,
+                                          Visitor& visit, float r2max, int* out, int cap) {
+  const unsigned below = (1u << L.lane()) - 1u;
+  int kept = 0;
+  for (int b = 0; b < count; b += W) {
+    const int e = b + L.lane();
+    bool near = false;
+    if (e < count) {
+      const int j = list[e];
+      Vec<D> d = xi - pos[j];
+      float r2 = norm2(d);
+      visit(j, d, r2);
+      near = r2 < r2max;
+    }
+    const unsigned m = L.group_ballot(near);
+    if (near) {
+      const int at = kept + __popc(m & below);
+      if (at < cap) out[at] = list[e];
+    }
+    kept += __popc(m);
+  }
+  return kept;
+}
+#endif
+
+}  // namespace cps

@@ -1,0 +1,28 @@
+"""The engine's headers are layered (docs/architecture.md): core/ is the bottom layer and
+includes nothing above it (only core/ headers and the standard or CUDA headers), and the
+spatial layer does not reach up into physics, scenes or sim."""
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2] / "cpp" / "include" / "corpuscle"
+INCLUDE = re.compile(r'^\s*#\s*include\s+"corpuscle/([a-z_]+)/', re.M)
+
+
+def includes(layer):
+    out = []
+    for h in sorted((ROOT / layer).glob("*.h")):
+        out += [(h.name, m.group(1)) for m in INCLUDE.finditer(h.read_text())]
+    return out
+
+
+def test_core_includes_nothing_above_it():
+    assert (ROOT / "core" / "lanes.h").exists()
+    above = [(h, dep) for h, dep in includes("core") if dep != "core"]
+    assert above == [], above
+
+
+def test_spatial_includes_only_core_and_spatial():
+    found = includes("spatial")
+    assert any(dep == "core" for _, dep in found)
+    above = [(h, dep) for h, dep in found if dep not in ("core", "spatial")]
+    assert above == [], above
