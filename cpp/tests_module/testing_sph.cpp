@@ -1,7 +1,7 @@
 // corpuscle._testing: the SPH kernel families (physics/sph_kernel_families.h), the pair terms
 // (physics/sph_pair_terms.h) and the CFL step (physics/timestep.h) evaluated on the host, so
-// pytest can check them against float64 NumPy (tests/test_sph_kernel_families.py,
-// tests/test_sph_pair_terms.py). The pair-term functions sum over all pairs i != j within the
+// pytest can check them against float64 NumPy (tests/physics/test_sph_kernel_families.py,
+// tests/physics/test_sph_pair_terms.py). The pair-term functions sum over all pairs i != j within the
 // support, evaluating (i, j) and (j, i) as two separate calls, as a pipeline's gather does.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>

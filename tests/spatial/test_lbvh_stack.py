@@ -2,7 +2,7 @@
 (the same contacts, forces and densities, bit for bit, as long as it is deep enough), and a
 walk that needs more than it has raises the overflow flag: the step is not taken and the run
 stops with a one-line error naming the key (exit 3 from the CLI), in the gather and in the
-reflexive traversal. On CUDA the stack is in shared memory (tests/test_wind_tunnel_gpu.py)."""
+reflexive traversal. On CUDA the stack is in shared memory (tests/scenes/wind_tunnel/test_wind_tunnel_gpu.py)."""
 
 from __future__ import annotations
 

@@ -93,7 +93,7 @@ def test_the_cpu_runs_one_lane_whatever_the_width():
 @pytest.mark.parametrize("lanes", WIDTHS)
 @pytest.mark.parametrize("neighbors", ["lists", "grid", "allpairs"])
 def test_cuda_single_scene_agrees_with_the_cpu_with_every_width(lanes, neighbors):
-    # 20 steps from rest: positions to 1e-5 m, as tests/test_neighbor_reuse.py asks of CUDA
+    # 20 steps from rest: positions to 1e-5 m, as tests/scenes/magic8ball/test_neighbor_reuse.py asks of CUDA
     c = single(lanes, "cpu", particles=1000, neighbors=neighbors, steps=20)
     g = single(lanes, "cuda", particles=1000, neighbors=neighbors, steps=20)
     assert g.core.scalars()["lanes"] == lanes
@@ -106,7 +106,7 @@ def test_cuda_single_scene_agrees_with_the_cpu_with_every_width(lanes, neighbors
 @cuda
 @pytest.mark.parametrize("lanes", WIDTHS)
 def test_cuda_batch_agrees_with_the_cpu_with_every_width(lanes):
-    # as tests/test_batch_api.py::test_cuda_batch_agrees_with_the_cpu, with per-scene counts
+    # as tests/scenes/magic8ball/test_batch_api.py::test_cuda_batch_agrees_with_the_cpu, with per-scene counts
     # (groups of one warp then straddle scenes and inactive slots)
     kw = dict(seed=[1, 2, 3, 4], particles=[260, 200, 260, 230], fluid__viscosity=[10.0, 20.0, 10.0, 15.0])
     c, g = batch(lanes, "cpu", n=4, **kw), batch(lanes, "cuda", n=4, **kw)

@@ -11,7 +11,7 @@
 // support radius h of the kernels here: pass hs explicitly (for the cubic spline and Wendland
 // with support 2 hs, hs = h / 2; DualSPHysics's dam break uses hs = 1.732 dp, support 2 hs).
 //
-// Conservation (tests/test_sph_pair_terms.py checks each):
+// Conservation (tests/physics/test_sph_pair_terms.py checks each):
 //   - the viscosities give m_i a_ij = -m_j a_ji exactly in exact arithmetic (momentum): their
 //     scalar factors are symmetric in (i, j) and multiply an antisymmetric vector;
 //   - the density diffusion gives V_i D_ij = -V_j D_ji (V = m / rho), so sum_i V_i drho_i/dt

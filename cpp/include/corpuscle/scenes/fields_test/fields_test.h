@@ -6,7 +6,7 @@
 //
 // Its `distance` field (the path length each particle has travelled) is what adding a field
 // takes: the table line (recorded, moving with the particle, checkpointed) and the line of
-// physics that writes it (MoveStage). tests/test_field_store.py finds it in frames,
+// physics that writes it (MoveStage). tests/sim/test_field_store.py finds it in frames,
 // checkpoints and Simulation.field, and packs and unpacks particles.
 #pragma once
 #include <cmath>
