@@ -45,8 +45,13 @@ class FieldsTestKind(kinds.Kind):
 def registered():
     if NAME not in dict(_core.kinds(hidden=True)):
         pytest.skip("this core has no fields-test kind")
+    from corpuscle import schema
+
     kinds.register(FieldsTestKind())
     yield
+    # the other tests see the kinds a user has
+    kinds._REGISTRY.pop(NAME, None)
+    schema.KINDS.pop(NAME, None)
 
 
 def make(backend="serial", n=2000):

@@ -65,13 +65,14 @@ inline Model build_model(const ParamSource& p) {
                   p.f("cfl_viscous")};
   // the grid covers the sphere and the ghosts mirrored up to the list radius beyond it
   float ext = m.wall.radius + m.list_radius;
-  m.grid = make_grid<D>(Vec3{{-ext, -ext, -ext}}, Vec3{{ext, ext, ext}}, m.list_radius);
-  if (m.grid.bits > morton_max_bits<D>()) {
+  m.grid = make_cell_grid<D>(Vec3{{-ext, -ext, -ext}}, Vec3{{ext, ext, ext}}, m.list_radius, 2);
+  if (m.grid.key_bits > 32) {
     char msg[320];
     std::snprintf(msg, sizeof msg,
-                  "magic8ball: container.radius = %g m spans more than %d cells per axis of the neighbour "
-                  "radius h (1 + sph.skin) = %g m: lower container.radius or raise sph.h (sph.scale_h = false)",
-                  double(m.wall.radius), 1 << morton_max_bits<D>(), double(m.list_radius));
+                  "magic8ball: container.radius = %g m spans %d cells per axis of the neighbour radius h (1 + "
+                  "sph.skin) = %g m, more than 32-bit sort keys hold: lower container.radius or raise sph.h "
+                  "(sph.scale_h = false)",
+                  double(m.wall.radius), m.grid.dims[0], double(m.list_radius));
     throw Error(msg);
   }
   auto shakes = p.tables("shakes");

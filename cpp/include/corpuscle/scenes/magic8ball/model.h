@@ -10,7 +10,7 @@
 #include "corpuscle/physics/sph.h"
 #include "corpuscle/physics/timestep.h"
 #include "corpuscle/sim/table.h"
-#include "corpuscle/spatial/grid.h"
+#include "corpuscle/spatial/cell_grid.h"
 
 namespace cps::m8 {
 
@@ -46,7 +46,7 @@ struct Model {
   ContactParams contact;
   BodyParams body;
   DtParams dt;
-  GridSpec<D> grid;
+  CellGridSpec<D> grid;  // cells of the list radius over the sphere and its ghosts; tags: 0 fluid, 1 ghosts
   int n_shakes;
   ShakeWindow shakes[kMaxShakes];
 };
@@ -61,6 +61,15 @@ struct ScenePhysics {
   float c0;              // sound speed (from sph)
   int n_active;          // fluid particles of the scene (at most Model::n_fluid)
 };
+
+// A slot's sort key within its scene: the grid's key of its cell with the layer as the tag
+// (0: fluid, 1: ghost), 32-bit (build_model checks the width); an unused slot (an inactive
+// fluid slot, a fluid particle without a ghost) gets all ones in those bits and sorts last.
+// Each scene has its own cell table (the grid's two tags) at scene * cells_per_scene.
+CPS_HD CPS_INLINE int key_bits(const Model& m) { return m.grid.key_bits; }
+CPS_HD CPS_INLINE uint32_t unused_key(const Model& m) { return ~uint32_t(0) >> (32 - key_bits(m)); }
+CPS_HD CPS_INLINE uint32_t cell_key(const Model& m, const Vec3& x, int layer) { return uint32_t(m.grid.key(x, layer)); }
+CPS_HD CPS_INLINE size_t cells_per_scene(const Model& m) { return size_t(m.grid.table_size()); }
 
 // per-step reductions over the fluid (combined with StepSums::combine, a fixed order per backend)
 struct StepSums {

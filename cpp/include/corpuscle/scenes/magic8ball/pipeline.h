@@ -61,7 +61,7 @@ class Pipeline {
   static int narrow_key_bits(const Model& m) {
     int low = 1;
     while ((1LL << low) < (long long)m.n_fluid) ++low;
-    if (low < m.grid.key_bits()) low = m.grid.key_bits();
+    if (low < key_bits(m)) low = key_bits(m);
     return !m.wide_keys && low + segment_bits(m) <= 32 ? low : 0;
   }
 
@@ -220,7 +220,7 @@ class Pipeline {
     //    bits, every scene's segments at once, each scene that does not rebuild keeping its
     //    order)
     if constexpr (!Many) {
-      ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, m.grid.key_bits(), RebuildFlag{md, g},
+      ex_.sort_then(a.keys, a.keys_sorted, a.idx, a.perm, cap, key_bits(m), RebuildFlag{md, g},
                     ReorderStage<Many>{md, g, a});
     } else {
       a.key_low_bits = key_low_bits_;
@@ -241,7 +241,14 @@ class Pipeline {
     ex_.mark(0);
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
-    GridView<D> grid{m.grid, s.pos, s.cell_start, s.cell_end};
+    CellGridView<D> grid;  // the walks' view: cells and positions (no keys: a batch's are its own)
+    grid.spec = m.grid;
+    grid.pos = s.pos;
+    grid.cell_start = s.cell_start;
+    grid.cell_end = s.cell_end;
+    grid.n = cap;
+    grid.r2 = m.list_radius * m.list_radius;
+    grid.tag_end = 2;  // fluid and ghosts
     // 3. density and pressure (and the neighbour lists); the container frame of this step
     for_each_pair_lanes(n, DensityStage<Index, Many>{md, g, u_, s, grid});
     ex_.mark(1);

@@ -4,7 +4,7 @@
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/lanes.h"
 #include "corpuscle/spatial/allpairs.h"
-#include "corpuscle/spatial/grid.h"
+#include "corpuscle/spatial/cell_grid.h"
 #include "corpuscle/spatial/lane_walks.h"
 #include "corpuscle/spatial/neighbor_list.h"
 #include "corpuscle/scenes/magic8ball/model.h"
@@ -28,7 +28,6 @@ CPS_HD CPS_INLINE void control_at(const Model& m, const Control& u, double t, Ve
 // its cell table at s * cells_per_scene. A single run is a batch of one (the same layout as
 // ever: fluid in [0, n), ghosts after it).
 CPS_HD CPS_INLINE int total_fluid(const Model& m) { return m.n_fluid * m.n_scenes; }
-CPS_HD CPS_INLINE size_t cells_per_scene(const Model& m) { return 2 * size_t(m.grid.ncells); }
 // The per-item scene arithmetic of the stages that run every step, for a single run
 // (Many = false: every scene index is 0 at compile time, as before batches existed; a
 // division per item costs the default scene about 1%) or a batch (Many = true).
@@ -45,7 +44,7 @@ struct Scenes {
     return of(m, j < N ? j : j - N);
   }
   // the grid of scene s: its own cell table
-  CPS_HD static GridView<D> grid(const Model& m, GridView<D> g, int s) {
+  CPS_HD static CellGridView<D> grid(const Model& m, CellGridView<D> g, int s) {
     if constexpr (Many) {
       g.cell_start += size_t(s) * cells_per_scene(m);
       g.cell_end += size_t(s) * cells_per_scene(m);
@@ -64,9 +63,9 @@ CPS_HD CPS_INLINE bool active_slot(const Model& m, const Scene* g, int i) {
 // inactive slot is keyed past every cell: sorted to its segment's tail, never visited)
 CPS_HD CPS_INLINE void write_keys(const Model& m, const Arrays& a, int i, const Vec3& x, bool active) {
   const int N = total_fluid(m);
-  a.keys[i] = active ? m.grid.key(x, 0) : m.grid.sentinel();
-  a.keys[N + i] = active && needs_ghost(m.wall, x, m.list_radius) ? m.grid.key(mirror_position(m.wall, x), 1)
-                                                                 : m.grid.sentinel();
+  a.keys[i] = active ? cell_key(m, x, 0) : unused_key(m);
+  a.keys[N + i] = active && needs_ghost(m.wall, x, m.list_radius) ? cell_key(m, mirror_position(m.wall, x), 1)
+                                                                 : unused_key(m);
   a.idx[i] = i;
   a.idx[N + i] = N + i;
 }
@@ -218,13 +217,12 @@ struct ReorderStage {
       }
       return;
     }
-    const uint32_t sentinel = m.grid.sentinel();
+    const uint32_t sentinel = unused_key(m);
     const uint32_t k = sorted_key<Many>(a, j);
     const bool last = j + 1 == end || sorted_key<Many>(a, j + 1) != k;
     if (k < sentinel) {
       // the cell's range in the scene's table (layer 1: the ghost half)
-      const size_t slot = size_t(s) * cells_per_scene(m) + (k & (m.grid.layer_bit() - 1u)) +
-                          ((k & m.grid.layer_bit()) ? m.grid.ncells : 0u);
+      const size_t slot = size_t(s) * cells_per_scene(m) + size_t(m.grid.slot_of_key(k));
       if (j == begin || sorted_key<Many>(a, j - 1) != k) a.cell_start[slot] = uint32_t(j);
       if (last) a.cell_end[slot] = uint32_t(j + 1);
     }
@@ -281,7 +279,7 @@ struct PairWalk {
   // visit the density neighbours of i (within the list radius for lists, else h); returns
   // (count within the list radius, count within h) as lists need them
   template <class Lanes, class V>
-  CPS_HD static void density(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
+  CPS_HD static void density(const Model& m, const Scene* g, const Arrays& a, const CellGridView<D>& grid, int i,
                              const Vec3& x, const Lanes& L, V& v, int& count, int& kept) {
     NoVisit none;
     if constexpr (Index::lists) {
@@ -289,10 +287,10 @@ struct PairWalk {
       int* list = lists.row(i);
       if (!rebuilding(m, g)) count = a.nbr_count[i];
       else if (m.list_scan) count = list_scene(m, g, grid, i, x, L, list);
-      else count = for_each_neighbor_listing(L, grid, x, true, none, list, m.max_neighbors);
+      else count = for_each_in_cells(L, grid, x, none, list, m.max_neighbors);
       kept = lists.walk_compacting(L, i, count, grid.pos, x, v, m.kern.support2(), near);
     } else if constexpr (Index::cells) {
-      kept = count = for_each_neighbor_listing(L, grid, x, true, v, nullptr, 0);
+      kept = count = for_each_in_cells(L, grid, x, v, nullptr, 0);
     } else {
       kept = count = all_pairs(m, g, grid, i, x, L, v);
     }
@@ -302,16 +300,16 @@ struct PairWalk {
   // scenes (h a good part of the container radius) the 27 cells around a particle hold most
   // of its scene anyway, in many short cell ranges; the scan walks it in full rounds
   template <class Lanes>
-  CPS_HD static int list_scene(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
+  CPS_HD static int list_scene(const Model& m, const Scene* g, const CellGridView<D>& grid, int i, const Vec3& x,
                                const Lanes& L, int* list) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
-    const AllPairsView<D> all = every_slot(m, grid, grid.spec.h2);
+    const AllPairsView<D> all = every_slot(m, grid, grid.r2);
     const int count = all.list_range(L, s * n, s * n + (Many ? g->phys.n_active : n), x, list, m.max_neighbors, 0);
     return all.list_range(L, ghosts, ghosts + g->n_ghost, x, list, m.max_neighbors, count);
   }
   // every fluid particle of i's scene, then its ghosts
   template <class Lanes, class V>
-  CPS_HD static int all_pairs(const Model& m, const Scene* g, const GridView<D>& grid, int i, const Vec3& x,
+  CPS_HD static int all_pairs(const Model& m, const Scene* g, const CellGridView<D>& grid, int i, const Vec3& x,
                               const Lanes& L, V& v) {
     const int n = m.n_fluid, s = Scenes<Many>::of(m, i), ghosts = Scenes<Many>::fluid(m) + s * n;
     const AllPairsView<D> all = every_slot(m, grid, m.kern.support2());
@@ -324,16 +322,16 @@ struct PairWalk {
   CPS_HD static RowLists nearby(const Model& m, const Arrays& a) { return RowLists{a.near, a.near_count, m.max_near}; }
   // the all-pairs view of every slot of the state (fluid and ghosts of every scene), queried
   // with squared radius r2; a particle walks its own scene's ranges of it
-  CPS_HD static AllPairsView<D> every_slot(const Model& m, const GridView<D>& grid, float r2) {
+  CPS_HD static AllPairsView<D> every_slot(const Model& m, const CellGridView<D>& grid, float r2) {
     return AllPairsView<D>{grid.pos, 2 * Scenes<Many>::fluid(m), r2};
   }
   template <class Lanes, class V>
-  CPS_HD static void forces(const Model& m, const Scene* g, const Arrays& a, const GridView<D>& grid, int i,
+  CPS_HD static void forces(const Model& m, const Scene* g, const Arrays& a, const CellGridView<D>& grid, int i,
                             const Vec3& x, const Lanes& L, V& fv) {
     if constexpr (Index::lists) {
       nearby(m, a).walk(L, i, grid.pos, x, fv);
     } else if constexpr (Index::cells) {
-      for_each_neighbor_listing(L, grid, x, true, fv, nullptr, 0);
+      for_each_in_cells(L, grid, x, fv, nullptr, 0);
     } else {
       all_pairs(m, g, grid, i, x, L, fv);
     }
@@ -353,7 +351,7 @@ struct DensityStage {
   Scene* g;
   const Control* ctl;
   Arrays a;
-  GridView<D> grid;
+  CellGridView<D> grid;
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
@@ -401,7 +399,7 @@ struct ForceStage {
   const Model* model;
   const Scene* g;
   Arrays a;
-  GridView<D> grid;
+  CellGridView<D> grid;
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
