@@ -1,5 +1,6 @@
 """The Magic 8-Ball's index plug-ins (--neighbors): lists (cells on rebuilds, lists with a
-skin in between), grid (cells every step) and allpairs (every pair) visit the same
+skin in between), grid (cells every step), compact (the cells in chunks through shared
+memory) and allpairs (every pair) visit the same
 neighbours within h, so they give the same densities, pressures and accelerations to float
 rounding, and the same motion over a few steps; the CUDA backend agrees with the CPU for each."""
 import numpy as np
@@ -9,7 +10,7 @@ pytest.importorskip("corpuscle._core")
 
 import corpuscle
 
-INDEXES = ["lists", "grid", "allpairs"]
+INDEXES = ["lists", "grid", "compact", "allpairs"]
 
 
 def make(neighbors, backend="cpu", n=600):
@@ -30,11 +31,11 @@ def test_every_index_is_registered_with_lists_first():
     kinds = _core.kinds()
     assert kinds["magic8ball"] == INDEXES
     assert make(None).neighbors == "lists"
-    with pytest.raises(ValueError, match=r"--neighbors must be one of lists, grid, allpairs \(the indexes of magic8ball\), got 'octree'"):
+    with pytest.raises(ValueError, match=r"--neighbors must be one of lists, grid, compact, allpairs \(the indexes of magic8ball\), got 'octree'"):
         make("octree")
 
 
-@pytest.mark.parametrize("neighbors", ["grid", "allpairs"])
+@pytest.mark.parametrize("neighbors", ["grid", "compact", "allpairs"])
 def test_indexes_give_the_same_evaluation(neighbors):
     ref, sim = make("lists"), make(neighbors)
     for s in (ref, sim):
@@ -53,7 +54,7 @@ def test_indexes_give_the_same_evaluation(neighbors):
     assert 0 < sim.state()["n_ghost"] <= ref.state()["n_ghost"]
 
 
-@pytest.mark.parametrize("neighbors", ["grid", "allpairs"])
+@pytest.mark.parametrize("neighbors", ["grid", "compact", "allpairs"])
 def test_indexes_give_the_same_motion(neighbors):
     ref, sim = make("lists"), make(neighbors)
     ref.step(20)
@@ -63,6 +64,22 @@ def test_indexes_give_the_same_motion(neighbors):
     assert np.abs(by_id(sim, "position") - by_id(ref, "position")).max() < 1e-6
     d1, d2 = sim.state()["die"], ref.state()["die"]
     assert np.abs(np.subtract(d1["position"], d2["position"])).max() < 1e-6
+
+
+@pytest.mark.parametrize("backend", ["serial", "cpu"])
+def test_compact_visits_what_grid_visits_in_the_same_order(backend):
+    # the chunks walk the cells, tags and slots in the cell walk's order: on the CPU the same sums
+    a, b = make("grid", backend, 500), make("compact", backend, 500)
+    a.step(8)
+    b.step(8)
+    for name in ("position", "velocity", "density", "pressure"):
+        assert np.array_equal(a.field(name, copy=True), b.field(name, copy=True)), name
+    assert a.state()["die"] == b.state()["die"]
+
+
+def test_a_batch_refuses_compact_naming_the_kind_and_the_index():
+    with pytest.raises(ValueError, match=r"^magic8ball: the compact index runs one scene; a batch of scenes uses lists, grid or allpairs$"):
+        corpuscle.Batch.from_scene("magic8ball", n=2, particles=300, neighbors="compact", backend="serial")
 
 
 def test_the_serial_and_openmp_backends_agree_bitwise_for_every_index():

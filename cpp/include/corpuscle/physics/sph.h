@@ -33,7 +33,9 @@ template <int D>
 struct DensityVisitor {
   const MuellerKernels<D>& k;
   float sum = 0.0f;
-  CPS_HD void operator()(int, const Vec<D>&, float r2) { sum += k.poly6.w_r2(r2); }
+  // one pair's term of the sum
+  CPS_HD static float term(const MuellerKernels<D>& k, float r2) { return k.poly6.w_r2(r2); }
+  CPS_HD void operator()(int, const Vec<D>&, float r2) { sum += term(k, r2); }
 };
 
 // finish the density sum (self term is part of the neighbour sum: j == i has r2 = 0)
@@ -56,55 +58,72 @@ struct alignas(8) ForceTerms {
   CPS_HD static ForceTerms of(float rho, float p) { return ForceTerms{p / (rho * rho), 1.0f / rho}; }
 };
 
+// one particle's sums (plain data: an index's per-lane accumulator can hold it)
 template <int D>
-struct ForceVisitor {
+struct ForceSum {
+  int i;
+  Vec<D> vi;
+  float rho_i, pterm_i;
+  Vec<D> acc_p, acc_v, dv_xsph;
+};
+// the pair terms over the fluid's arrays
+template <int D>
+struct ForcePairs {
   const MuellerKernels<D>& k;
-  const SphParams& p;
   const Vec<D>* vel;
   const float* rho;
   const ForceTerms* terms;
-  int i;
   int n_fluid;  // indices below are fluid, the rest ghosts (XSPH ignores ghosts)
-  Vec<D> vi;
-  float rho_i, pterm_i;
-  Vec<D> acc_p = Vec<D>::zero();
-  Vec<D> acc_v = Vec<D>::zero();
-  Vec<D> dv_xsph = Vec<D>::zero();
 
-  CPS_HD ForceVisitor(const MuellerKernels<D>& k_, const SphParams& p_, const Vec<D>* vel_, const float* rho_,
-                      const ForceTerms* terms_, int i_, int n_fluid_)
-      : k(k_), p(p_), vel(vel_), rho(rho_), terms(terms_), i(i_), n_fluid(n_fluid_) {
-    vi = vel[i];
-    rho_i = rho[i];
-    pterm_i = terms[i].pterm;
+  CPS_HD ForceSum<D> begin(int i) const {
+    ForceSum<D> s;
+    s.i = i;
+    s.vi = vel[i];
+    s.rho_i = rho[i];
+    s.pterm_i = terms[i].pterm;
+    s.acc_p = s.acc_v = s.dv_xsph = Vec<D>::zero();
+    return s;
   }
-
-  CPS_HD void operator()(int j, const Vec<D>& d, float r2) {
-    if (j == i) return;
+  CPS_HD void add(ForceSum<D>& s, int j, const Vec<D>& d, float r2) const {
+    if (j == s.i) return;
     const float rinv = r2 > 0.0f ? frsqrt(r2) : 0.0f;
     const float r = r2 * rinv;
     const float rho_j = rho[j];
     const ForceTerms tj = terms[j];
-    Vec<D> dv = vel[j] - vi;
+    Vec<D> dv = vel[j] - s.vi;
     // symmetric pressure term
-    float pterm = pterm_i + tj.pterm;
-    acc_p -= k.spiky.grad_rinv(d, r, rinv) * pterm;
+    float pterm = s.pterm_i + tj.pterm;
+    s.acc_p -= k.spiky.grad_rinv(d, r, rinv) * pterm;
     // viscosity (the 1/rho_i factor is applied in acceleration())
-    acc_v += dv * (k.visc.lap(r) * tj.inv_rho);
+    s.acc_v += dv * (k.visc.lap(r) * tj.inv_rho);
     // XSPH velocity smoothing over fluid neighbours only
-    if (j < n_fluid) dv_xsph += dv * (k.poly6.w_r2(r2) * 2.0f / (rho_i + rho_j));
+    if (j < n_fluid) s.dv_xsph += dv * (k.poly6.w_r2(r2) * 2.0f / (s.rho_i + rho_j));
   }
-
+  // (the particle mass, common to every pair, is applied once here)
+  CPS_HD static Vec<D> acceleration(const SphParams& p, const ForceSum<D>& s) {
+    return (s.acc_p + s.acc_v * (p.viscosity / s.rho_i)) * p.mass;
+  }
+  CPS_HD static Vec<D> xsph_correction(const SphParams& p, const ForceSum<D>& s) { return s.dv_xsph * (p.xsph * p.mass); }
+};
+// the visitor of a walk: ForcePairs over one particle's ForceSum
+template <int D>
+struct ForceVisitor {
+  ForcePairs<D> pairs;
+  const SphParams& p;
+  ForceSum<D> s;
+  CPS_HD ForceVisitor(const MuellerKernels<D>& k_, const SphParams& p_, const Vec<D>* vel_, const float* rho_,
+                      const ForceTerms* terms_, int i_, int n_fluid_)
+      : pairs{k_, vel_, rho_, terms_, n_fluid_}, p(p_), s(pairs.begin(i_)) {}
+  CPS_HD void operator()(int j, const Vec<D>& d, float r2) { pairs.add(s, j, d, r2); }
   // combine the partial sums of cooperating lanes
   template <class Lanes>
   CPS_HD void reduce(const Lanes& L) {
-    acc_p = L.sum(acc_p);
-    acc_v = L.sum(acc_v);
-    dv_xsph = L.sum(dv_xsph);
+    s.acc_p = L.sum(s.acc_p);
+    s.acc_v = L.sum(s.acc_v);
+    s.dv_xsph = L.sum(s.dv_xsph);
   }
-  // (the particle mass, common to every pair, is applied once here)
-  CPS_HD Vec<D> acceleration() const { return (acc_p + acc_v * (p.viscosity / rho_i)) * p.mass; }
-  CPS_HD Vec<D> xsph_correction() const { return dv_xsph * (p.xsph * p.mass); }
+  CPS_HD Vec<D> acceleration() const { return ForcePairs<D>::acceleration(p, s); }
+  CPS_HD Vec<D> xsph_correction() const { return ForcePairs<D>::xsph_correction(p, s); }
 };
 
 }  // namespace cps

@@ -200,7 +200,9 @@ struct CellGridView {
     }
     return keys[i];
   }
-  CPS_HD bool active(int i) const { return key(i) != CellGridSpec<D>::kSentinel; }
+  // slot i holds a particle: its key's tag is one of the grid's (an unused slot's key is the
+  // sentinel, or any key past the last tag)
+  CPS_HD bool active(int i) const { return (key(i) >> spec.tag_shift()) < uint64_t(spec.ntags); }
   CPS_HD const Vec<D>& position(int i) const { return pos[i]; }
   CPS_HD float max_radius() const { return spec.radius; }
   CPS_HD CellGridView with_radius(float r) const {

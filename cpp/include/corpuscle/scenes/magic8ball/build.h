@@ -174,7 +174,7 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
 }
 
 // the index plug-ins of this kind, the first the default
-using Indexes = IndexList<ListsIndex, GridIndex, AllPairsIndex>;
+using Indexes = IndexList<ListsIndex, GridIndex, CompactIndex, AllPairsIndex>;
 
 // the kind in the list of kinds (sim/kinds.h)
 struct Entry {

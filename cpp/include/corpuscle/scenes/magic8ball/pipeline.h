@@ -4,8 +4,11 @@
 //
 // Index plug-ins (`--neighbors`): Lists (cells walked on rebuilds only, neighbour lists with a
 // skin reused in between), Grid (the cells walked every step by both pair stages) and
-// AllPairs (every fluid particle and ghost visited: O(N^2), a reference). All three visit the
-// same neighbours within h, so they give the same physics to float rounding.
+// Compact (the grid's cells in chunks of a warp, each chunk's neighbour cells staged through
+// shared memory: spatial/compact_grid.h; a single scene) and AllPairs (every fluid particle
+// and ghost visited: O(N^2), a reference). All four visit the same neighbours within h, so
+// they give the same physics to float rounding (on the CPU, grid and compact visit them in
+// the same order: the same results).
 #pragma once
 #include <algorithm>
 #include <cmath>
@@ -40,7 +43,8 @@ class Pipeline {
     const double n = total_fluid(m), cap = 2.0 * n;
     const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + sizeof(ForceTerms) +
                             2 * sizeof(uint32_t) + 2 * sizeof(int);
-    const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int);
+    const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int) +
+                             (Index::compact ? 2 * sizeof(int) : 0);
     const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
     const double cells = 2.0 * double(cells_per_scene(m)) * double(m.n_scenes) * sizeof(uint32_t);
     const double sort_scratch = cap * (sizeof(uint32_t) + sizeof(int)) * 2.0;
@@ -70,6 +74,8 @@ class Pipeline {
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u) : ex_(ex), m_(m), g_(g), u_(u) {
     if (m.n_fluid <= 0) throw Error("magic8ball: no fluid particles");
     if (m.n_scenes <= 0) throw Error("magic8ball: no scenes");
+    if (Index::compact && m.n_scenes > 1)
+      throw Error("magic8ball: the compact index runs one scene; a batch of scenes uses lists, grid or allpairs");
     const int n = total_fluid(m), cap = 2 * n;
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(Model));
@@ -241,25 +247,32 @@ class Pipeline {
     ex_.mark(0);
     // from here on the sorted arrays are current
     Arrays s = arrays(nxt, cur);
-    CellGridView<D> grid;  // the walks' view: cells and positions (no keys: a batch's are its own)
+    CellGridView<D> grid;  // the walks' view (the sorted keys of a single scene: a batch's are its own)
     grid.spec = m.grid;
+    if constexpr (!Many) grid.keys32 = s.keys_sorted;
     grid.pos = s.pos;
     grid.cell_start = s.cell_start;
     grid.cell_end = s.cell_end;
     grid.n = cap;
     grid.r2 = m.list_radius * m.list_radius;
     grid.tag_end = 2;  // fluid and ghosts
+    // the compact index's chunks of the fluid's cells
+    if constexpr (Index::compact) {
+      CellGridView<D> fluid = grid;
+      fluid.n = n;
+      compact_.build(ex_, fluid);
+    }
     // 3. density and pressure (and the neighbour lists); the container frame of this step
-    for_each_pair_lanes(n, DensityStage<Index, Many>{md, g, u_, s, grid});
+    pair_pass(n, grid, DensityStage<Index, Many>{md, g, u_, s, grid});
     ex_.mark(1);
     // 4. forces, then the reductions and the per-scene update (one kernel where it fits)
     if (integrate) {
       if constexpr (!Many) {
-        if (m.lanes == 32) {
+        if (m.lanes == 32 && !Index::compact) {
           ex_.for_each_lanes_reduce_then(n, ForceStage<Index, Many>{md, g, s, grid}, s.items, &g->pending, SumsOp{},
                                          StepSums::identity(), FinalizeStage{md, g});
         } else {
-          for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+          pair_pass(n, grid, ForceStage<Index, Many>{md, g, s, grid});
           ex_.reduce_then(s.items, n, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage{md, g});
         }
       } else {
@@ -272,7 +285,7 @@ class Pipeline {
       ex_.for_each(keys_items(m), IntegrateStage<Many>{md, g, s});
       ex_.mark(3);
     } else {
-      for_each_pair_lanes(n, ForceStage<Index, Many>{md, g, s, grid});
+      pair_pass(n, grid, ForceStage<Index, Many>{md, g, s, grid});
       if constexpr (!Many) {
         ex_.reduce(s.items, n, &g->sums, SumsOp{}, StepSums::identity());
       } else {
@@ -283,6 +296,12 @@ class Pipeline {
     }
   }
 
+  // a pair stage over the fluid: through the compact grid's chunks, or by lanes
+  template <class F>
+  void pair_pass(int n, const CellGridView<D>& grid, const F& f) {
+    if constexpr (Index::compact) gather_stage_compact(ex_, compact_.view(grid), f);
+    else for_each_pair_lanes(n, f);
+  }
   // a pair stage with the model's lanes per particle (CUDA: a warp, or groups of 16, 8 or 4
   // lanes of one; the CPU runs one lane whatever the width)
   template <class F>
@@ -447,6 +466,7 @@ class Pipeline {
   Buf<uint32_t> cells_start_, cells_end_;
   Buf<uint64_t> keys64_, keys64_sorted_;  // a batch's segmented sort (64-bit keys)
   int key_low_bits_ = 0;                  // a batch's keys are 32-bit (narrow_key_bits), or 64-bit (0)
+  CompactGrid<D, Exec> compact_;         // the compact index's chunks
   Buf<StepSums> scene_sums_;              // a batch's per-scene reductions
   Buf<Vec3> cache_pos_, cache_vel_;       // a batch's reset cache (cache_scenes)
   Buf<int> cache_id_;

@@ -5,6 +5,7 @@
 #include "corpuscle/core/lanes.h"
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/cell_grid.h"
+#include "corpuscle/spatial/compact_grid.h"
 #include "corpuscle/spatial/lane_walks.h"
 #include "corpuscle/spatial/neighbor_list.h"
 #include "corpuscle/scenes/magic8ball/model.h"
@@ -262,15 +263,20 @@ struct NoVisit {
 // the index plug-ins of this kind (the registry names them)
 struct ListsIndex {
   static constexpr const char* name = "lists";
-  static constexpr bool lists = true, cells = true;
+  static constexpr bool lists = true, cells = true, compact = false;
 };
 struct GridIndex {
   static constexpr const char* name = "grid";
-  static constexpr bool lists = false, cells = true;
+  static constexpr bool lists = false, cells = true, compact = false;
+};
+// the cells in chunks of a warp through shared memory (spatial/compact_grid.h); one scene
+struct CompactIndex {
+  static constexpr const char* name = "compact";
+  static constexpr bool lists = false, cells = true, compact = true;
 };
 struct AllPairsIndex {
   static constexpr const char* name = "allpairs";
-  static constexpr bool lists = false, cells = false;
+  static constexpr bool lists = false, cells = false, compact = false;
 };
 
 // the two pair stages for each index: the density (and, for lists, the listing) and the forces
@@ -345,6 +351,13 @@ struct PairWalk {
 // Near the die the kernel is cut by its surface: the sum is renormalised by the fluid share
 // of the kernel (Poly6's box_fraction), as if mirrored fluid filled the die, so the
 // pressure there, and with it the buoyancy the contacts transmit, is hydrostatic.
+// whether fluid slot i of scene s is left alone this step: its scene halted, or (a batch) the
+// slot is past the scene's particles
+template <bool Many>
+CPS_HD CPS_INLINE bool idle_slot(const Model& m, const Scene* gs, int i, int s) {
+  return halted(gs) || (Many && i - s * m.n_fluid >= gs->phys.n_active);
+}
+
 template <class Index, bool Many>
 struct DensityStage {
   const Model* model;
@@ -352,22 +365,38 @@ struct DensityStage {
   const Control* ctl;
   Arrays a;
   CellGridView<D> grid;
+  // the walk by lanes (lists, grid, allpairs)
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
     using S = Scenes<Many>;
     const int s = S::of(m, i);
     Scene* gs = g + s;
-    if (halted(gs) || (Many && i - s * m.n_fluid >= gs->phys.n_active)) return;
-    const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
+    if (idle_slot<Many>(m, gs, i, s)) return;
     DensityVisitor<D> v{m.kern};
     Vec3 x = a.pos[i];
-    const bool rebuild = rebuilding(m, gs);
     int count = 0, kept = 0;
     PairWalk<Index, Many>::density(m, gs, a, S::grid(m, grid, s), i, x, L, v, count, kept);
     float sum = L.sum(v.sum);
     if (!L.leader()) return;
-    if (S::first(m, i)) prepare_frame(m, ctl[s], *gs);  // read by the force stage and the finalize
+    write(i, s, gs, x, sum, count, kept);
+  }
+  // the compact index's begin / visit / end (spatial/compact_grid.h: a lane per particle of
+  // a chunk of the fluid)
+  using Acc = float;
+  CPS_HD float begin(int) const { return 0.0f; }
+  CPS_HD void visit(float& sum, int, int, const Vec3&, float r2) const { sum += DensityVisitor<D>::term(model->kern, r2); }
+  CPS_HD void end(int i, float& sum) const {
+    const int s = Scenes<Many>::of(*model, i);
+    Scene* gs = g + s;
+    if (!idle_slot<Many>(*model, gs, i, s)) write(i, s, gs, a.pos[i], sum, 0, 0);
+  }
+  // particle i's density and pressure from its kernel sum (and the lists' counts)
+  CPS_HD void write(int i, int s, Scene* gs, const Vec3& x, float sum, int count, int kept) const {
+    const Model& m = *model;
+    const ScenePhysics& P = gs->phys;
+    const bool rebuild = rebuilding(m, gs);
+    if (Scenes<Many>::first(m, i)) prepare_frame(m, ctl[s], *gs);  // read by the force stage and the finalize
     if constexpr (Index::lists) {
       a.near_count[i] = kept;
       if (count > m.max_neighbors || kept > m.max_near) raise_first(&gs->clock.bad, kBadNeighbors);
@@ -393,29 +422,46 @@ struct DensityStage {
 
 // stage 4: SPH forces (over the neighbours the density stage listed), XSPH, container-frame
 // terms and die coupling of fluid particles; the per-particle contributions to this step's
-// reductions
+// reductions (the reduction of a step not taken is discarded; idle slots are not reduced)
 template <class Index, bool Many>
 struct ForceStage {
   const Model* model;
   const Scene* g;
   Arrays a;
   CellGridView<D> grid;
+  // the walk by lanes (lists, grid, allpairs)
   template <class Lanes>
   CPS_HD void operator()(int i, const Lanes& L) const {
     const Model& m = *model;
     using S = Scenes<Many>;
     const int sc = S::of(m, i);
     const Scene* gs = g + sc;
-    // the reduction of a step not taken is discarded; inactive slots are not reduced
-    if (halted(gs) || (Many && i - sc * m.n_fluid >= gs->phys.n_active)) return;
+    if (idle_slot<Many>(m, gs, i, sc)) return;
     const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
     ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.terms, i, S::fluid(m));
     Vec3 x = a.pos[i];
     PairWalk<Index, Many>::forces(m, gs, a, S::grid(m, grid, sc), i, x, L, fv);
     fv.reduce(L);
     if (!L.leader()) return;
+    write(i, gs, P, x, fv.s);
+  }
+  // the compact index's begin / visit / end
+  using Acc = ForceSum<D>;
+  CPS_HD ForcePairs<D> pairs() const {
+    return ForcePairs<D>{model->kern, a.vel, a.rho, a.terms, Scenes<Many>::fluid(*model)};
+  }
+  CPS_HD Acc begin(int i) const { return pairs().begin(i); }
+  CPS_HD void visit(Acc& f, int, int j, const Vec3& d, float r2) const { pairs().add(f, j, d, r2); }
+  CPS_HD void end(int i, Acc& f) const {
+    const int sc = Scenes<Many>::of(*model, i);
+    const Scene* gs = g + sc;
+    if (!idle_slot<Many>(*model, gs, i, sc)) write(i, gs, gs->phys, a.pos[i], f);
+  }
+  // particle i's acceleration, XSPH correction and reduction item from its pair sums
+  CPS_HD void write(int i, const Scene* gs, const ScenePhysics& P, const Vec3& x, const ForceSum<D>& f) const {
+    const Model& m = *model;
     Vec3 v = a.vel[i];
-    Vec3 acc = fv.acceleration() + frame_acceleration(gs->frame, x, v);
+    Vec3 acc = ForcePairs<D>::acceleration(P.sph, f) + frame_acceleration(gs->frame, x, v);
     StepSums s = StepSums::identity();
     // die: contact spring + drag on the particle, reaction on the die
     Vec3 ad;
@@ -427,7 +473,7 @@ struct ForceStage {
       s.contacts = 1;
     }
     a.acc[i] = acc;
-    a.xsph[i] = fv.xsph_correction();
+    a.xsph[i] = ForcePairs<D>::xsph_correction(P.sph, f);
     float rho = a.rho[i];
     float err = rho / P.sph.rest_density - 1.0f;
     s.vmax2 = norm2(v);
