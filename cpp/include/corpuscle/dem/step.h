@@ -14,17 +14,17 @@
 namespace cps::dem {
 
 struct GridIndex {
-  static constexpr const char* name = "grid";
+  static constexpr const char* name = index_name::grid;
   static constexpr bool kGrid = true;
 };
 // every particle against every other (O(N^2)): the reference the grid is tested against
 struct AllPairsIndex {
-  static constexpr const char* name = "allpairs";
+  static constexpr const char* name = index_name::allpairs;
   static constexpr bool kGrid = false;
 };
 // the seed's Karras LBVH over Morton codes (spatial/lbvh.h), gather form
 struct LbvhIndex {
-  static constexpr const char* name = "lbvh";
+  static constexpr const char* name = index_name::lbvh;
   static constexpr bool kGrid = false;
 };
 template <class Index>

@@ -43,6 +43,16 @@
 
 namespace cps {
 
+// the names of the index plug-ins (`--neighbors`): a kind's plug-in takes its name from here,
+// so one index is one name in every kind
+namespace index_name {
+inline constexpr const char* lists = "lists";
+inline constexpr const char* grid = "grid";
+inline constexpr const char* compact = "compact";
+inline constexpr const char* allpairs = "allpairs";
+inline constexpr const char* lbvh = "lbvh";
+}  // namespace index_name
+
 // the largest float: "no limit" for max_radius()
 constexpr float kNoRadiusLimit = 3.402823466e38f;
 

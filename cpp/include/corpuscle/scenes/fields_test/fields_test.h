@@ -58,7 +58,7 @@ struct Scene {
 #define CPS_FTEST_CONTROLS(X) X(acceleration, float, D, acc)
 
 struct GridIndex {
-  static constexpr const char* name = "grid";
+  static constexpr const char* name = index_name::grid;
 };
 
 // the clock: the step's dt (shortened to land on the end time), or none

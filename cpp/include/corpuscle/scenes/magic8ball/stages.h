@@ -262,20 +262,20 @@ struct NoVisit {
 
 // the index plug-ins of this kind (the registry names them)
 struct ListsIndex {
-  static constexpr const char* name = "lists";
+  static constexpr const char* name = index_name::lists;
   static constexpr bool lists = true, cells = true, compact = false;
 };
 struct GridIndex {
-  static constexpr const char* name = "grid";
+  static constexpr const char* name = index_name::grid;
   static constexpr bool lists = false, cells = true, compact = false;
 };
 // the cells in chunks of a warp through shared memory (spatial/compact_grid.h); one scene
 struct CompactIndex {
-  static constexpr const char* name = "compact";
+  static constexpr const char* name = index_name::compact;
   static constexpr bool lists = false, cells = true, compact = true;
 };
 struct AllPairsIndex {
-  static constexpr const char* name = "allpairs";
+  static constexpr const char* name = index_name::allpairs;
   static constexpr bool lists = false, cells = false, compact = false;
 };
 

@@ -40,16 +40,16 @@
 namespace cps::sph {
 
 struct GridIndex {
-  static constexpr const char* name = "grid";
+  static constexpr const char* name = index_name::grid;
 };
 struct CompactIndex {
-  static constexpr const char* name = "compact";
+  static constexpr const char* name = index_name::compact;
 };
 struct AllPairsIndex {
-  static constexpr const char* name = "allpairs";
+  static constexpr const char* name = index_name::allpairs;
 };
 struct ListsIndex {
-  static constexpr const char* name = "lists";
+  static constexpr const char* name = index_name::lists;
 };
 
 // the pair stage's blocks per multiprocessor on CUDA (__launch_bounds__: 128 threads and 8
