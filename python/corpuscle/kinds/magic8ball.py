@@ -206,7 +206,7 @@ class Magic8Ball(Kind):
     methods = ("set_die",)
     checkpoint_extra = ("spacing",)
     unstable_reasons = UNSTABLE_REASONS
-    frame_fields = ("position", "density", "pressure")
+    frame_fields = ()  # the core's table marks what frames record (position, density, pressure)
     ghost_fields = ("ghost_position",)
     units = {"position": "m", "velocity": "m/s", "density": "kg/m³", "pressure": "Pa", "ghost_position": "m",
              "kinetic_energy": "J", "density_error": "-", "mean_density": "kg/m³", "die_height": "m",

@@ -29,8 +29,8 @@ struct CacheFluidStage {
   Vec3 *pos, *vel;
   int* id;
   CPS_HD void operator()(int i) const {
-    pos[i] = a.pos[i];
-    vel[i] = a.vel[i];
+    pos[i] = a.position[i];
+    vel[i] = a.velocity[i];
     id[i] = a.id[i];
   }
 };
@@ -68,8 +68,8 @@ struct RestoreFluidStage {
       x = qrotate(t.turn, x);
       v = qrotate(t.turn, v);
     }
-    a.pos[i] = x;
-    a.vel[i] = v;
+    a.position[i] = x;
+    a.velocity[i] = v;
     a.id[i] = id[i];
     write_keys(m, a, i, x, local < cached[t.scene].phys.n_active);
     a.ghost_of[i] = -1;

@@ -139,25 +139,5 @@ struct Scene {
   int n_ghost;           // ghost particles of the last rebuild
 };
 
-// structure of arrays; fluid in [0, n_fluid), ghosts after it, capacity 2 n_fluid
-struct Arrays {
-  Vec3 *pos, *vel, *pos_alt, *vel_alt;
-  float *rho, *prs;
-  ForceTerms* terms;     // p / rho^2 and 1 / rho of every slot (the force pass's per-particle terms)
-  int *id, *id_alt;      // fluid: persistent particle id; ghost: -1
-  uint32_t *keys, *keys_sorted;
-  uint64_t *keys64, *keys64_sorted;  // a batch's segmented keys (several scenes)
-  int key_low_bits;      // a batch's keys: 32-bit in keys / keys_sorted, the cell key in the low key_low_bits
-                         // (0: 64-bit in keys64 / keys64_sorted, the cell key in the low 32)
-  int *idx, *perm;
-  int *ghost_of;         // fluid index before the sort -> its ghost's sorted slot, or -1
-  int *ghost_slot;       // sorted fluid index -> its ghost's slot, or -1 (kept between rebuilds)
-  Vec3* x_build;         // positions at the last rebuild
-  Vec3 *acc, *xsph;
-  StepSums* items;
-  int *nbr, *nbr_count;  // neighbour lists within the list radius (max_neighbors per fluid particle)
-  int *near, *near_count;  // this step's neighbours within h (max_near per particle), for the forces
-  uint32_t *cell_start, *cell_end;
-};
 
 }  // namespace cps::m8

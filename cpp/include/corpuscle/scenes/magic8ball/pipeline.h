@@ -41,9 +41,8 @@ class Pipeline {
   static size_t near_slots(const Model& m) { return Index::lists ? size_t(total_fluid(m)) * size_t(m.max_near) : 0; }
   static double bytes_needed(const Model& m) {
     const double n = total_fluid(m), cap = 2.0 * n;
-    const double per_slot = 2 * 2 * sizeof(Vec3) + 2 * sizeof(int) + 2 * sizeof(float) + sizeof(ForceTerms) +
-                            2 * sizeof(uint32_t) + 2 * sizeof(int);
-    const double per_fluid = 2 * sizeof(int) + 3 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int) +
+    const double per_slot = sizeof(ForceTerms) + 2 * sizeof(uint32_t) + 2 * sizeof(int);
+    const double per_fluid = 2 * sizeof(int) + 2 * sizeof(Vec3) + sizeof(StepSums) + 2 * sizeof(int) +
                              (Index::compact ? 2 * sizeof(int) : 0);
     const double lists = sizeof(int) * (double(list_slots(m)) + double(near_slots(m)));
     const double cells = 2.0 * double(cells_per_scene(m)) * double(m.n_scenes) * sizeof(uint32_t);
@@ -51,7 +50,7 @@ class Pipeline {
     const double batch = m.n_scenes > 1 ? (narrow_key_bits(m) ? 0.0 : cap * 2.0 * sizeof(uint64_t)) +
                                               m.n_scenes * sizeof(StepSums)
                                         : 0.0;
-    return cap * per_slot + n * per_fluid + lists + cells + sort_scratch + batch;
+    return field_bytes(cap) + cap * per_slot + n * per_fluid + lists + cells + sort_scratch + batch;
   }
 
   // a batch's sort keys: the segment (layer and scene) above the cell key, or above a scene
@@ -69,7 +68,7 @@ class Pipeline {
     return !m.wide_keys && low + segment_bits(m) <= 32 ? low : 0;
   }
 
-  CPS_KIND_TABLES(CPS_M8_FIELDS, CPS_M8_SCALARS, CPS_M8_CONTROLS, Scene, Control)
+  CPS_KIND_STORED_TABLES(CPS_M8_FIELDS, CPS_M8_GHOST_FIELDS, CPS_M8_SCALARS, CPS_M8_CONTROLS, Scene, Control, Arrays)
 
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u) : ex_(ex), m_(m), g_(g), u_(u) {
     if (m.n_fluid <= 0) throw Error("magic8ball: no fluid particles");
@@ -79,13 +78,7 @@ class Pipeline {
     const int n = total_fluid(m), cap = 2 * n;
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(Model));
-    for (int p = 0; p < 2; ++p) {
-      pos_[p].resize(cap);
-      vel_[p].resize(cap);
-      id_[p].resize(cap);
-    }
-    rho_.resize(cap);
-    prs_.resize(cap);
+    fields_.resize(size_t(cap));
     terms_.resize(cap);
     keys_.resize(cap);
     keys_sorted_.resize(cap);
@@ -94,7 +87,6 @@ class Pipeline {
     ghost_of_.resize(n);
     ghost_slot_.resize(n);
     x_build_.resize(n);
-    acc_.resize(n);
     xsph_.resize(n);
     items_.resize(n);
     nbr_.resize(list_slots(m));
@@ -250,7 +242,7 @@ class Pipeline {
     CellGridView<D> grid;  // the walks' view (the sorted keys of a single scene: a batch's are its own)
     grid.spec = m.grid;
     if constexpr (!Many) grid.keys32 = s.keys_sorted;
-    grid.pos = s.pos;
+    grid.pos = s.position;
     grid.cell_start = s.cell_start;
     grid.cell_end = s.cell_end;
     grid.n = cap;
@@ -320,11 +312,13 @@ class Pipeline {
     const int n = total_fluid(m_);
     const int cur = parity_;
     const int n_ghost = sorted_ ? rec.n_ghost : 0;
+    std::pair<void*, long long> stored;
+    if (field_view(name, cur, n, stored)) return stored;
     if (m_.n_scenes > 1 && name.rfind("ghost_", 0) == 0)
       throw Error("magic8ball: ghost fields of a batch of scenes are not contiguous; read them per scene (not yet)");
 #define CPS_FIELD_VIEW(fname, T, comps, group, ckpt, settable, storage, count) \
   if (name == #fname) return {static_cast<void*>(storage), (long long)(count)};
-    CPS_M8_FIELDS(CPS_FIELD_VIEW)
+    CPS_M8_GHOST_FIELDS(CPS_FIELD_VIEW)
 #undef CPS_FIELD_VIEW
     throw Error("magic8ball: no field '" + name + "'");
   }
@@ -335,17 +329,14 @@ class Pipeline {
     const int n = total_fluid(m_);
     if (count != n) throw Error("magic8ball: " + name + " needs " + std::to_string(n) + " items");
     const int cur = parity_;
-    if (name == "position") {
-      ex_.to_device(pos_[cur].data(), src, n * sizeof(Vec3));
+    bool settable = false;
+    for (const FieldInfo& f : field_table()) settable = settable || (f.name == name && f.settable);
+    if (name != "id" && !settable) throw Error("magic8ball: field '" + name + "' cannot be set");
+    field_upload(ex_, name, src, n, cur);
+    if (name == "position") {  // a new state: its particles numbered in order
       std::vector<int> ids(n);
       for (int i = 0; i < n; ++i) ids[i] = i;
-      ex_.to_device(id_[cur].data(), ids.data(), n * sizeof(int));
-    } else if (name == "velocity") {
-      ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec3));
-    } else if (name == "id") {
-      ex_.to_device(id_[cur].data(), src, n * sizeof(int));
-    } else {
-      throw Error("magic8ball: field '" + name + "' cannot be set");
+      ex_.to_device(fields_.id.cur(cur), ids.data(), n * sizeof(int));
     }
     invalidate(true);
   }
@@ -415,16 +406,9 @@ class Pipeline {
   }
 
  private:
-  Arrays arrays(int cur, int nxt) {
+  Arrays arrays(int cur, int /* nxt: cur ^ 1 */) {
     Arrays a;
-    a.pos = pos_[cur].data();
-    a.vel = vel_[cur].data();
-    a.pos_alt = pos_[nxt].data();
-    a.vel_alt = vel_[nxt].data();
-    a.id = id_[cur].data();
-    a.id_alt = id_[nxt].data();
-    a.rho = rho_.data();
-    a.prs = prs_.data();
+    fields_.fill(a, cur);  // (the other buffers: nxt = cur ^ 1)
     a.terms = terms_.data();
     a.keys = keys_.data();
     a.keys_sorted = keys_sorted_.data();
@@ -433,7 +417,6 @@ class Pipeline {
     a.ghost_of = ghost_of_.data();
     a.ghost_slot = ghost_slot_.data();
     a.x_build = x_build_.data();
-    a.acc = acc_.data();
     a.xsph = xsph_.data();
     a.items = items_.data();
     a.nbr = nbr_.data();
@@ -453,14 +436,11 @@ class Pipeline {
   Scene* g_;
   const Control* u_;
   Buf<Model> model_;
-  Buf<Vec3> pos_[2], vel_[2];
-  Buf<int> id_[2];
-  Buf<float> rho_, prs_;
   Buf<ForceTerms> terms_;
   Buf<uint32_t> keys_, keys_sorted_;
   Buf<int> idx_, perm_, ghost_of_, ghost_slot_;
   Buf<Vec3> x_build_;
-  Buf<Vec3> acc_, xsph_;
+  Buf<Vec3> xsph_;
   Buf<StepSums> items_;
   Buf<int> nbr_, nbr_count_, near_, near_count_;
   Buf<uint32_t> cells_start_, cells_end_;

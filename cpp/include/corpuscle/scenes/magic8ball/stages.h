@@ -8,7 +8,7 @@
 #include "corpuscle/spatial/compact_grid.h"
 #include "corpuscle/spatial/lane_walks.h"
 #include "corpuscle/spatial/neighbor_list.h"
-#include "corpuscle/scenes/magic8ball/model.h"
+#include "corpuscle/scenes/magic8ball/tables.h"
 
 namespace cps::m8 {
 
@@ -110,7 +110,7 @@ struct KeysStage {
   CPS_HD void operator()(int i) const {
     const Model& m = *model;
     const bool fluid = i < total_fluid(m);
-    Vec3 x = fluid ? a.pos[i] : Vec3::zero();
+    Vec3 x = fluid ? a.position[i] : Vec3::zero();
     start_step(m, a, i, &x, fluid && active_slot(m, g, i));
     if (fluid && Scenes<true>::first(m, i)) {
       Scene* gs = g + Scenes<true>::of(m, i);
@@ -211,11 +211,7 @@ struct ReorderStage {
     const bool fluid = j < N;
     const int begin = (fluid ? 0 : N) + s * n, end = begin + n;  // this slot's segment
     if (!rebuilding(m, gs) || halted(gs)) {
-      if (fluid || j - begin < gs->n_ghost) {
-        a.pos_alt[j] = a.pos[j];
-        a.vel_alt[j] = a.vel[j];
-        a.id_alt[j] = a.id[j];
-      }
+      if (fluid || j - begin < gs->n_ghost) a.gather(j, j);
       return;
     }
     const uint32_t sentinel = unused_key(m);
@@ -228,25 +224,19 @@ struct ReorderStage {
       if (last) a.cell_end[slot] = uint32_t(j + 1);
     }
     if (k >= sentinel) {
-      if (fluid) {  // an inactive slot (its segment's tail) keeps its values
-        a.pos_alt[j] = a.pos[a.perm[j]];
-        a.vel_alt[j] = a.vel[a.perm[j]];
-        a.id_alt[j] = a.id[a.perm[j]];
-      }
+      if (fluid) a.gather(j, a.perm[j]);  // an inactive slot (its segment's tail) keeps its values
       if (!fluid && j == begin) gs->n_ghost = 0;  // no ghost in this scene
       return;
     }
     int o = a.perm[j];
     if (o < N) {
-      a.pos_alt[j] = a.pos[o];
-      a.vel_alt[j] = a.vel[o];
-      a.id_alt[j] = a.id[o];
-      a.x_build[j] = a.pos[o];
+      a.gather(j, o);  // every field that moves with the particle
+      a.x_build[j] = a.position[o];
     } else {
       int f = o - N;
-      Vec3 x = a.pos[f];
-      a.pos_alt[j] = mirror_position(m.wall, x);
-      a.vel_alt[j] = mirror_velocity(x, a.vel[f]);
+      Vec3 x = a.position[f];
+      a.position_alt[j] = mirror_position(m.wall, x);
+      a.velocity_alt[j] = mirror_velocity(x, a.velocity[f]);
       a.id_alt[j] = -1;
       a.ghost_of[f] = j;
     }
@@ -374,7 +364,7 @@ struct DensityStage {
     Scene* gs = g + s;
     if (idle_slot<Many>(m, gs, i, s)) return;
     DensityVisitor<D> v{m.kern};
-    Vec3 x = a.pos[i];
+    Vec3 x = a.position[i];
     int count = 0, kept = 0;
     PairWalk<Index, Many>::density(m, gs, a, S::grid(m, grid, s), i, x, L, v, count, kept);
     float sum = L.sum(v.sum);
@@ -389,7 +379,7 @@ struct DensityStage {
   CPS_HD void end(int i, float& sum) const {
     const int s = Scenes<Many>::of(*model, i);
     Scene* gs = g + s;
-    if (!idle_slot<Many>(*model, gs, i, s)) write(i, s, gs, a.pos[i], sum, 0, 0);
+    if (!idle_slot<Many>(*model, gs, i, s)) write(i, s, gs, a.position[i], sum, 0, 0);
   }
   // particle i's density and pressure from its kernel sum (and the lists' counts)
   CPS_HD void write(int i, int s, Scene* gs, const Vec3& x, float sum, int count, int kept) const {
@@ -407,14 +397,14 @@ struct DensityStage {
     float rho = finish_density(P.sph, sum / (1.0f - fmin2(cut, 0.5f)));
     float p = tait_pressure(P.sph, rho);
     const ForceTerms t = ForceTerms::of(rho, p);
-    a.rho[i] = rho;
-    a.prs[i] = p;
+    a.density[i] = rho;
+    a.pressure[i] = p;
     a.terms[i] = t;
     // the ghost of this particle carries the same density and pressure
     int ghost = a.ghost_slot[i];
     if (ghost >= 0) {
-      a.rho[ghost] = rho;
-      a.prs[ghost] = p;
+      a.density[ghost] = rho;
+      a.pressure[ghost] = p;
       a.terms[ghost] = t;
     }
   }
@@ -438,8 +428,8 @@ struct ForceStage {
     const Scene* gs = g + sc;
     if (idle_slot<Many>(m, gs, i, sc)) return;
     const ScenePhysics P = gs->phys;  // a copy: constant for the whole walk
-    ForceVisitor<D> fv(m.kern, P.sph, a.vel, a.rho, a.terms, i, S::fluid(m));
-    Vec3 x = a.pos[i];
+    ForceVisitor<D> fv(m.kern, P.sph, a.velocity, a.density, a.terms, i, S::fluid(m));
+    Vec3 x = a.position[i];
     PairWalk<Index, Many>::forces(m, gs, a, S::grid(m, grid, sc), i, x, L, fv);
     fv.reduce(L);
     if (!L.leader()) return;
@@ -448,19 +438,19 @@ struct ForceStage {
   // the compact index's begin / visit / end
   using Acc = ForceSum<D>;
   CPS_HD ForcePairs<D> pairs() const {
-    return ForcePairs<D>{model->kern, a.vel, a.rho, a.terms, Scenes<Many>::fluid(*model)};
+    return ForcePairs<D>{model->kern, a.velocity, a.density, a.terms, Scenes<Many>::fluid(*model)};
   }
   CPS_HD Acc begin(int i) const { return pairs().begin(i); }
   CPS_HD void visit(Acc& f, int, int j, const Vec3& d, float r2) const { pairs().add(f, j, d, r2); }
   CPS_HD void end(int i, Acc& f) const {
     const int sc = Scenes<Many>::of(*model, i);
     const Scene* gs = g + sc;
-    if (!idle_slot<Many>(*model, gs, i, sc)) write(i, gs, gs->phys, a.pos[i], f);
+    if (!idle_slot<Many>(*model, gs, i, sc)) write(i, gs, gs->phys, a.position[i], f);
   }
   // particle i's acceleration, XSPH correction and reduction item from its pair sums
   CPS_HD void write(int i, const Scene* gs, const ScenePhysics& P, const Vec3& x, const ForceSum<D>& f) const {
     const Model& m = *model;
-    Vec3 v = a.vel[i];
+    Vec3 v = a.velocity[i];
     Vec3 acc = ForcePairs<D>::acceleration(P.sph, f) + frame_acceleration(gs->frame, x, v);
     StepSums s = StepSums::identity();
     // die: contact spring + drag on the particle, reaction on the die
@@ -472,9 +462,9 @@ struct ForceStage {
       s.torque = cross(x - gs->die.x, F);
       s.contacts = 1;
     }
-    a.acc[i] = acc;
+    a.acceleration[i] = acc;
     a.xsph[i] = ForcePairs<D>::xsph_correction(P.sph, f);
-    float rho = a.rho[i];
+    float rho = a.density[i];
     float err = rho / P.sph.rest_density - 1.0f;
     s.vmax2 = norm2(v);
     s.amax2 = norm2(acc);
@@ -614,22 +604,22 @@ struct IntegrateStage {
     // and so do inactive slots (a batch's; a single run has none)
     const bool active = fluid && (!Many || active_slot(m, g, i));
     const bool taken = active && gs->step_dt > 0.0f;
-    if (fluid && !taken) x = a.pos[i];
+    if (fluid && !taken) x = a.position[i];
     if (fluid && taken) {
       float dt = gs->step_dt;
-      Vec3 v = a.vel[i] + a.acc[i] * dt;
-      x = a.pos[i] + (v + a.xsph[i]) * dt;
+      Vec3 v = a.velocity[i] + a.acceleration[i] * dt;
+      x = a.position[i] + (v + a.xsph[i]) * dt;
       reflect_at_wall(m.wall, x, v);
       if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&gs->clock.bad, kBadParticles);
-      a.pos[i] = x;
-      a.vel[i] = v;
+      a.position[i] = x;
+      a.velocity[i] = v;
       // the ghost follows its particle between rebuilds
       const Vec3 xb = a.x_build[i];
       int ghost = a.ghost_slot[i];
       if (ghost >= 0) {
         const Vec3 xg = mirror_position(m.wall, x);
-        a.pos[ghost] = xg;
-        a.vel[ghost] = mirror_velocity(x, v);
+        a.position[ghost] = xg;
+        a.velocity[ghost] = mirror_velocity(x, v);
         if (ghost_matters(m, x)) atomic_max_above(&gs->moved[1], float_bits(norm2(xg - mirror_position(m.wall, xb))));
       }
       // how far it moved since the last rebuild: the next step relists when the scene moved
