@@ -242,7 +242,7 @@ class WindTunnel(Kind):
     default_particles = DEFAULT_PARTICLES
     particle_key = "gas.particles"
     unstable_reasons = UNSTABLE_REASONS
-    frame_fields = ("position", "pressure", "number_density")
+    frame_fields = ()  # the core's table marks what frames record (position, pressure, number_density)
     units = {"position": "m", "velocity": "m/s", "pressure": "N/m", "number_density": "1/m^2", "force": "N/m",
              "lift": "N/m", "drag": "N/m", "moment": "N", "pitch": "deg", "kinetic_energy": "J", "vmax": "m/s",
              "airfoil_contacts": "count"}

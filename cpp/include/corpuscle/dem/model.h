@@ -10,6 +10,7 @@
 // This file: the spheres' constant parameters, the arrays every DEM pipeline has, the
 // fault codes, the integrators and the dt rule.
 #pragma once
+#include "corpuscle/core/field_ptrs.h"
 #include "corpuscle/core/vec.h"
 #include "corpuscle/physics/dem.h"
 
@@ -44,17 +45,32 @@ struct SoftSpheres {
   float dt_max;
 };
 
-// The arrays every DEM pipeline gives its stages (a kind's Arrays derives from it and adds
-// its own fields; the stages take this part). pos/vel/id: the current buffers, *_alt the
-// other ones (the reorder writes them); the per-step outputs are written by the force stage.
+// The fields every DEM kind has, rows of its field table (sim/field_store.h; D: the kind's
+// dimension), in two parts so that a kind's own moving fields can sit between them:
+//   position, velocity, id: the spheres, moved with them by every reorder;
+//   pressure (the sum of contact-force magnitudes: the wind tunnel seed's "pressure"),
+//   number_density (particles per unit area, D = 3: volume, around each: its cell block),
+//   force (the contact force this step), contacts (overlapping neighbours, walls and bodies):
+//   written by the force stage every step.
+// X(name, C type, components, group, checkpointed, settable, recorded, moves)
+#define CPS_DEM_MOVING_FIELDS(X)                          \
+  X(position, float, D, "fluid", true, true, true, true)  \
+  X(velocity, float, D, "fluid", true, true, false, true) \
+  X(id, int, 1, "fluid", true, false, true, true)
+#define CPS_DEM_STEP_FIELDS(X)                                    \
+  X(pressure, float, 1, "fluid", false, false, true, false)       \
+  X(number_density, float, 1, "fluid", false, false, true, false) \
+  X(force, float, D, "fluid", false, false, false, false)         \
+  X(contacts, int, 1, "fluid", false, false, false, false)
+#define CPS_DEM_FIELDS(X) CPS_DEM_MOVING_FIELDS(X) CPS_DEM_STEP_FIELDS(X)
+
+// The arrays every DEM pipeline gives its stages: those fields' pointers (`name`: the current
+// buffers, `name_alt`: the other ones, which the reorder writes). A kind's Arrays derives from
+// it, adding its own fields' pointers and a gather over all of its table (the stages take this
+// part; the reorder takes the kind's).
 template <int D>
 struct Arrays {
-  Vec<D> *pos, *vel, *pos_alt, *vel_alt;
-  int *id, *id_alt;
-  float* number_density;  // particles per unit area (D = 3: volume) around each (grid cell block)
-  Vec<D>* force;          // contact force on each particle (this step)
-  float* pressure;        // sum of contact-force magnitudes (the wind tunnel seed's "pressure")
-  int* contacts;          // overlapping neighbours, walls and bodies
+  CPS_FIELD_PTRS(CPS_DEM_FIELDS)
 };
 
 // the fastest particle moves at most dt_fraction radii per step, and dt <= dt_max

@@ -12,7 +12,7 @@
 //   finalize hook   begin(G) (every step, first), sums_finite(S) (the kind's sums sound?),
 //                   taken(G, S, dt) (a step of dt is taken: the kind's own bookkeeping)
 //   integrate hook  after(i, dt, x, v): the kind's boundaries on the moved sphere (outflow,
-//                   re-entry, projections; s.pos[i] still holds the old position)
+//                   re-entry, projections; s.position[i] still holds the old position)
 //
 // The kind's per-step sums type (`Sums`) has identity() and combine() and the members vmax2,
 // ke (filled here) and total_force; its record (`Record`) has clock, pending, sums and step_dt.
@@ -31,11 +31,6 @@ CPS_HD CPS_INLINE void add_count(long long* p, long long v) {
 #endif
 }
 
-// no extra reordered field
-struct NoExtraFields {
-  CPS_HD void operator()(int, int) const {}
-};
-
 // a finalize hook for a kind with no per-scene bookkeeping of its own
 struct NoBookkeeping {
   template <class Record>
@@ -53,19 +48,14 @@ struct FreeFlight {
 };
 
 // stage 1: the current arrays gathered into the index's order (order: sorted slot -> input
-// slot; null: a plain copy, for a collisionless gas that needs no index)
-template <int D, class Extra = NoExtraFields>
+// slot; null: a plain copy, for a collisionless gas that needs no index): every field that
+// moves with its sphere, the module's and the kind's (A: the kind's arrays, dem::Arrays or one
+// derived from it with CPS_FIELD_GATHER over its whole table)
+template <class A>
 struct ReorderStage {
   const int* order;
-  Arrays<D> a;
-  Extra extra;
-  CPS_HD void operator()(int j) const {
-    int o = order ? order[j] : j;
-    a.pos_alt[j] = a.pos[o];
-    a.vel_alt[j] = a.vel[o];
-    a.id_alt[j] = a.id[o];
-    extra(j, o);
-  }
+  A a;
+  CPS_HD void operator()(int j) const { a.gather(j, order ? order[j] : j); }
 };
 
 // the reflexive form, stage 2a: the per-particle contact sums zeroed
@@ -92,7 +82,7 @@ struct PairStage {
   CPS_HD void operator()(int i) const {
     if (halted(g)) return;
     const SoftSpheres<D>& m = *model;
-    const Vec<D> x = s.pos[i], v = s.vel[i];
+    const Vec<D> x = s.position[i], v = s.velocity[i];
     const float r = m.radius;
     Vec<D> F = Vec<D>::zero();
     float pressure = 0.0f;
@@ -101,7 +91,7 @@ struct PairStage {
     auto touch = [&](int j, float shift) {
       Vec<D> f;
       float mag;
-      if (pair_contact_force_d<D>(m.pp, image_displacement(x, s.pos[j], shift), v, r, s.vel[j], r, f, mag)) {
+      if (pair_contact_force_d<D>(m.pp, image_displacement(x, s.position[j], shift), v, r, s.velocity[j], r, f, mag)) {
         F += f;
         pressure += mag;
         contacts += 1;
@@ -145,12 +135,12 @@ struct ForceStage {
   CPS_HD Sums eval(int i) const {
     if (halted(g)) return Sums::identity();  // the reduction of a step not taken is discarded
     const SoftSpheres<D>& m = *model;
-    const Vec<D> x = s.pos[i], v = s.vel[i];
+    const Vec<D> x = s.position[i], v = s.velocity[i];
     Vec<D> F = Vec<D>::zero();
     float pressure = 0.0f;
     int contacts = 0;
-    const Vec<D>* pos = s.pos;
-    const Vec<D>* vel = s.vel;
+    const Vec<D>* pos = s.position;
+    const Vec<D>* vel = s.velocity;
     const float r = m.radius;
     const SpringDashpot law = m.pp;
     float density = 0.0f;
@@ -262,7 +252,7 @@ struct IntegrateStage {
     const float dt = g->step_dt;
     if (!(dt > 0.0f)) return;  // a step not taken leaves the particles as they are
     const SoftSpheres<D>& m = *model;
-    Vec<D> x = s.pos[i], v = s.vel[i];
+    Vec<D> x = s.position[i], v = s.velocity[i];
     euler_step(m, s.force[i], dt, x, v);
     hook.after(i, dt, x, v);
     wrap_span(m, x);
@@ -271,8 +261,8 @@ struct IntegrateStage {
     } else {
       if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&g->clock.bad, kBadParticles);
     }
-    s.pos[i] = x;
-    s.vel[i] = v;
+    s.position[i] = x;
+    s.velocity[i] = v;
   }
 };
 

@@ -47,29 +47,29 @@ struct CombineSums {
   CPS_HD Sums operator()(const Sums& a, const Sums& b) const { return Sums::combine(a, b); }
 };
 
-// Step part 1: key and sort the current positions (a.pos), gather the arrays into the index's
-// order in the other buffers (a.pos_alt ...; `extra` the kind's other fields), build the index
-// on them (cell ranges, or the tree's nodes and boxes). A collisionless gas needs no index and
-// the all-pairs reference no order: the arrays are copied as they are.
-template <class Index, int D, class Exec, class Extra>
-void sort_and_reorder(Exec& ex, const SoftSpheres<D>& m, CellGrid<D, Exec>& grid, Lbvh<D, Exec>& tree,
-                      const Arrays<D>& a, const Extra& extra) {
+// Step part 1: key and sort the current positions (a.position), gather the kind's arrays
+// (A: dem::Arrays<D> or the kind's, derived from it) into the index's order in the other
+// buffers (a.position_alt ...: every field of its table that moves with the sphere), build the
+// index on them (cell ranges, or the tree's nodes and boxes). A collisionless gas needs no
+// index and the all-pairs reference no order: the arrays are copied as they are.
+template <class Index, int D, class Exec, class A>
+void sort_and_reorder(Exec& ex, const SoftSpheres<D>& m, CellGrid<D, Exec>& grid, Lbvh<D, Exec>& tree, const A& a) {
   const int n = m.n;
   if (m.collide && kIsTree<Index>) {
-    tree.sort(ex, a.pos, n);
+    tree.sort(ex, a.position, n);
     ex.mark(0);
-    ex.for_each(n, ReorderStage<D, Extra>{tree.order(), a, extra});
+    ex.for_each(n, ReorderStage<A>{tree.order(), a});
     ex.mark(1);
-    tree.build(ex, a.pos_alt);
+    tree.build(ex, a.position_alt);
   } else if (m.collide && Index::kGrid) {
-    grid.sort(ex, a.pos, nullptr, n);
+    grid.sort(ex, a.position, nullptr, n);
     ex.mark(0);
-    ex.for_each(n, ReorderStage<D, Extra>{grid.order(), a, extra});
+    ex.for_each(n, ReorderStage<A>{grid.order(), a});
     ex.mark(1);
     grid.mark(ex);
   } else {
     ex.mark(0);
-    ex.for_each(n, ReorderStage<D, Extra>{nullptr, a, extra});
+    ex.for_each(n, ReorderStage<A>{nullptr, a});
     ex.mark(1);
   }
   ex.mark(2);
@@ -119,12 +119,12 @@ void contacts_and_sums(Exec& ex, const SoftSpheres<D>& m, const SoftSpheres<D>* 
     ex.mark(4);
   };
   if constexpr (Index::kGrid) {
-    contacts(grid.view(s.pos).with_radius(2.0f * m.radius));  // the contact reach, whatever the cell
+    contacts(grid.view(s.position).with_radius(2.0f * m.radius));  // the contact reach, whatever the cell
   } else if constexpr (kTree) {
-    contacts(tree.view(s.pos, &g->clock.bad, kBadTraversal, m.lbvh_stack));
+    contacts(tree.view(s.position, &g->clock.bad, kBadTraversal, m.lbvh_stack));
   } else {
     const float reach = 2.0f * m.radius;
-    contacts(AllPairsView<D>{s.pos, n, reach * reach * (1.0f + 4e-6f)});
+    contacts(AllPairsView<D>{s.position, n, reach * reach * (1.0f + 4e-6f)});
   }
 }
 

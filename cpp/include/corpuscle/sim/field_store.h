@@ -23,21 +23,10 @@
 #include <type_traits>
 #include <utility>
 
-#include "corpuscle/core/vec.h"
+#include "corpuscle/core/field_ptrs.h"
 #include "corpuscle/sim/table.h"
 
 namespace cps {
-
-// the item of a field of `C` components of T (a vector: Vec<C> of floats)
-template <class T, int C>
-struct FieldItem {
-  static_assert(std::is_same<T, float>::value, "vector fields are of float");
-  using type = Vec<C>;
-};
-template <class T>
-struct FieldItem<T, 1> {
-  using type = T;
-};
 
 // one field's buffers in the Exec's memory: two for a field that moves with the particle
 // (the current slots and the other, sorted ones; parity picks which is current), else one
@@ -52,12 +41,6 @@ struct FieldBuffer {
   Item* alt(int parity) { return b[Moves ? parity ^ 1 : 0].data(); }
 };
 
-#define CPS_FS_ITEM_(T, comps) typename ::cps::FieldItem<T, comps>::type
-#define CPS_FS_PTR_(name, T, comps, group, ckpt, settable, recorded, moves) \
-  CPS_FS_ITEM_(T, comps) * name;                                            \
-  CPS_FS_ITEM_(T, comps) * name##_alt;
-#define CPS_FS_GATHER_(name, T, comps, group, ckpt, settable, recorded, moves) \
-  if constexpr (moves) name##_alt[j] = name[o];
 #define CPS_FS_MEMBER_(name, T, comps, group, ckpt, settable, recorded, moves) \
   ::cps::FieldBuffer<Exec, CPS_FS_ITEM_(T, comps), moves> name;
 #define CPS_FS_RESIZE_(name, T, comps, group, ckpt, settable, recorded, moves) name.resize(n);
@@ -78,13 +61,6 @@ struct FieldBuffer {
   }
 #define CPS_FS_INFO_(name, T, comps, group, ckpt, settable, recorded, moves) \
   t.push_back(FieldInfo{#name, group, dtype_of<T>(), comps, ckpt, settable, recorded});
-
-// the device pointers of a stored table's fields (inside a struct the stages take: `name`,
-// the current slots, `name_alt`, the other buffer) and the reorder's copy: slot j of the other
-// buffers takes slot o's moving fields
-#define CPS_FIELD_PTRS(FIELDS) \
-  FIELDS(CPS_FS_PTR_)          \
-  CPS_HD void gather(int j, int o) const { FIELDS(CPS_FS_GATHER_) }
 
 // a kind's tables (sim/table.h) with the fields of FIELDS stored as above, then those of VIEWS
 // (sim/table.h's rows: views the pipeline gives itself, into the stored buffers; a macro

@@ -129,14 +129,5 @@ struct Scene {
   int n_leaving;
 };
 
-// structure of arrays; particles sorted by cell every step: the spheres' (dem/model.h:
-// positions, velocities, ids, their other buffers, number density, force, pressure, contacts)
-// and the tunnel's
-template <int D>
-struct Arrays : dem::Arrays<D> {
-  int *scattered, *scattered_alt;  // 1: touched the airfoil since it (re-)entered
-  StepSums<D>* items;
-  int* leaving;      // this step's leaving particles (slots; -1 once placed on the conveyor)
-};
 
 }  // namespace cps::wt

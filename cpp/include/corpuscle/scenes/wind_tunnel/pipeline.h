@@ -60,13 +60,12 @@ class Pipeline {
 
   static double bytes_needed(const Model& m) {
     const double n = m.n;
-    const double per = 2 * (2 * sizeof(Vec<D>) + 2 * sizeof(int)) + sizeof(Vec<D>) + 2 * sizeof(float) + sizeof(int) +
-                       sizeof(StepSums) + 4 * sizeof(uint64_t) + 3 * sizeof(int);
+    const double per = sizeof(StepSums) + 4 * sizeof(uint64_t) + 3 * sizeof(int);
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
-    return n * per + cells + sizeof(Model);
+    return field_bytes(n) + n * per + cells + sizeof(Model);
   }
 
-  CPS_KIND_TABLES(CPS_WT_FIELDS, CPS_WT_SCALARS, CPS_WT_CONTROLS, Scene, Control)
+  CPS_KIND_STORED_TABLES(CPS_WT_FIELDS, CPS_NO_FIELDS, CPS_WT_SCALARS, CPS_WT_CONTROLS, Scene, Control, Arrays)
 
   Pipeline(Exec& ex, const Model& m, Scene* g, const Control* u)
       : ex_(ex), m_(m), g_(g), u_(u), grid_(grid_spec(m)), tree_(m.lo, m.hi, dem::tree_reach<D>(m)) {
@@ -85,17 +84,8 @@ class Pipeline {
     }
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(Model));
-    for (int p = 0; p < 2; ++p) {
-      pos_[p].resize(n);
-      vel_[p].resize(n);
-      id_[p].resize(n);
-      scat_[p].resize(n);
-    }
-    force_.resize(n);
+    fields_.resize(size_t(n));
     if (std::is_same_v<Index, LbvhIndex>) tree_.resize(n);
-    pressure_.resize(n);
-    ndens_.resize(n);
-    contacts_.resize(n);
     items_.resize(n);
     leaving_.resize(n);
   }
@@ -135,7 +125,7 @@ class Pipeline {
     // 1. key and sort the current positions, gather the arrays into the index's order (the
     // airfoil flag with them), build the index (the DEM module's; stages timed 0, 1, 2)
     const Arrays a = arrays(cur, nxt);
-    dem::sort_and_reorder<Index>(ex_, m_, grid_, tree_, a, ReorderScattered{a.scattered, a.scattered_alt});
+    dem::sort_and_reorder<Index>(ex_, m_, grid_, tree_, a);
     Arrays s = arrays(nxt, cur);
     // 2. contacts (gather or reflexive), walls and airfoil (the Boundary hook), and 3. the
     // step's sums with the per-scene update (dt, block averages, clock: the Finalize hook)
@@ -154,12 +144,8 @@ class Pipeline {
   }
 
   std::pair<void*, long long> view(const std::string& name, const Scene&) {
-    const int n = m_.n;
-    const int cur = parity_;
-#define CPS_FIELD_VIEW(fname, T, comps, group, ckpt, settable, storage, count) \
-  if (name == #fname) return {static_cast<void*>(storage), (long long)(count)};
-    CPS_WT_FIELDS(CPS_FIELD_VIEW)
-#undef CPS_FIELD_VIEW
+    std::pair<void*, long long> stored;
+    if (field_view(name, parity_, m_.n, stored)) return stored;
     throw Error(std::string(kind) + ": no field '" + name + "'");
   }
 
@@ -168,21 +154,17 @@ class Pipeline {
     const int n = m_.n;
     if (count != n) throw Error(std::string(kind) + ": " + name + " needs " + std::to_string(n) + " items");
     const int cur = parity_;
-    if (name == "position") {
-      ex_.to_device(pos_[cur].data(), src, n * sizeof(Vec<D>));
+    // settable, or a checkpoint's (id, scattered)
+    bool accepted = false;
+    for (const FieldInfo& f : field_table()) accepted = accepted || (f.name == name && (f.settable || f.checkpointed));
+    if (!accepted || !field_upload(ex_, name, src, n, cur))
+      throw Error(std::string(kind) + ": field '" + name + "' cannot be set");
+    if (name == "position") {  // a new state: its particles numbered in order, none scattered
       std::vector<int> ids(n);
       for (int i = 0; i < n; ++i) ids[i] = i;
-      ex_.to_device(id_[cur].data(), ids.data(), n * sizeof(int));
+      ex_.to_device(fields_.id.cur(cur), ids.data(), n * sizeof(int));
       std::vector<int> zero(n, 0);
-      ex_.to_device(scat_[cur].data(), zero.data(), n * sizeof(int));
-    } else if (name == "velocity") {
-      ex_.to_device(vel_[cur].data(), src, n * sizeof(Vec<D>));
-    } else if (name == "id") {
-      ex_.to_device(id_[cur].data(), src, n * sizeof(int));
-    } else if (name == "scattered") {
-      ex_.to_device(scat_[cur].data(), src, n * sizeof(int));
-    } else {
-      throw Error(std::string(kind) + ": field '" + name + "' cannot be set");
+      ex_.to_device(fields_.scattered.cur(cur), zero.data(), n * sizeof(int));
     }
   }
 
@@ -207,20 +189,9 @@ class Pipeline {
   }
 
  private:
-  Arrays arrays(int cur, int nxt) {
+  Arrays arrays(int cur, int /* nxt: cur ^ 1 */) {
     Arrays a;
-    a.pos = pos_[cur].data();
-    a.vel = vel_[cur].data();
-    a.pos_alt = pos_[nxt].data();
-    a.vel_alt = vel_[nxt].data();
-    a.id = id_[cur].data();
-    a.id_alt = id_[nxt].data();
-    a.scattered = scat_[cur].data();
-    a.scattered_alt = scat_[nxt].data();
-    a.number_density = ndens_.data();
-    a.force = force_.data();
-    a.pressure = pressure_.data();
-    a.contacts = contacts_.data();
+    fields_.fill(a, cur);
     a.items = items_.data();
     a.leaving = leaving_.data();
     return a;
@@ -235,13 +206,6 @@ class Pipeline {
   Buf<Model> model_;
   Buf<int> foil_start_, foil_refs_;  // the airfoil's edge grid (polygon_grid.h)
   Buf<unsigned char> foil_flag_;
-  Buf<Vec<D>> pos_[2], vel_[2];
-  Buf<int> id_[2];
-  Buf<int> scat_[2];
-  Buf<float> ndens_;
-  Buf<Vec<D>> force_;
-  Buf<float> pressure_;
-  Buf<int> contacts_;
   Buf<StepSums> items_;
   Buf<int> leaving_;  // this step's leaving particles (the inflow conveyor)
   int parity_ = 0;

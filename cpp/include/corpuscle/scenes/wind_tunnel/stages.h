@@ -9,7 +9,7 @@
 #pragma once
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/dem/stages.h"
-#include "corpuscle/scenes/wind_tunnel/model.h"
+#include "corpuscle/scenes/wind_tunnel/tables.h"
 
 namespace cps::wt {
 
@@ -350,10 +350,10 @@ struct ConveyorPlaceStage {
       if (r < 0 || g->conv_claim[r] != id) continue;  // no free row, or a smaller id got it
       g->conv_claim[r] = kNoClaim;
       g->conv_next[r] = int(c + 1);
-      s.pos[i] = conveyor_slot(m, g->inflow_x, r, c);
+      s.position[i] = conveyor_slot(m, g->inflow_x, r, c);
       Vec<D> v = Vec<D>::zero();
       v[0] = stream_speed(m, *ctl);
-      s.vel[i] = v;
+      s.velocity[i] = v;
       s.leaving[k] = -1;
     }
   }
@@ -422,13 +422,6 @@ CPS_HD CPS_INLINE bool keep_out(const Model<D>& m, const AirfoilFrame& af, Vec<D
 
 // The hooks of the DEM module's stages (dem/stages.h)
 
-// the reorder hook: the airfoil flag moves with its particle
-struct ReorderScattered {
-  const int* scattered;
-  int* scattered_alt;
-  CPS_HD void operator()(int j, int o) const { scattered_alt[j] = scattered[o]; }
-};
-
 // the force hook: the two walls and the airfoil (boundary_forces), the reaction on the
 // airfoil into the step's sums item, the airfoil flag set on a contact
 template <int D>
@@ -482,7 +475,7 @@ struct Outflow {
     } else if (x[0] > m.hi[0] || x[0] < m.lo[0]) {
       scattered = 0;
       // the fraction of the step since it crossed the boundary (from its move this step)
-      const float x0 = s.pos[i][0], edge = x[0] > m.hi[0] ? m.hi[0] : m.lo[0];
+      const float x0 = s.position[i][0], edge = x[0] > m.hi[0] ? m.hi[0] : m.lo[0];
       const float moved = x[0] - x0;
       const float frac = moved != 0.0f ? fclamp((x[0] - edge) / moved, 0.0f, 1.0f) : 0.0f;
       // the step counter is already the next step's: (id, step) is unique

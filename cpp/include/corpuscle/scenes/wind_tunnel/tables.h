@@ -2,18 +2,14 @@
 // per-scene record and its control (expanded as the Magic 8-Ball's are).
 #pragma once
 #include "corpuscle/scenes/wind_tunnel/model.h"
+#include "corpuscle/sim/field_store.h"
 
-// X(name, C type, components, group, checkpointed, settable, storage, count)
-// (cur: the current buffers, n: particles; D: the Pipeline's dimension)
-#define CPS_WT_FIELDS(X)                                                  \
-  X(position, float, D, "fluid", true, true, pos_[cur].data(), n)         \
-  X(velocity, float, D, "fluid", true, true, vel_[cur].data(), n)         \
-  X(id, int, 1, "fluid", true, false, id_[cur].data(), n)                 \
-  X(scattered, int, 1, "fluid", true, false, scat_[cur].data(), n)       \
-  X(pressure, float, 1, "fluid", false, false, pressure_.data(), n)       \
-  X(number_density, float, 1, "fluid", false, false, ndens_.data(), n)    \
-  X(force, float, D, "fluid", false, false, force_.data(), n)             \
-  X(contacts, int, 1, "fluid", false, false, contacts_.data(), n)
+// the fields that own their storage (sim/field_store.h): the spheres' (dem/model.h) and the
+// tunnel's own; D: the Pipeline's dimension
+// X(name, C type, components, group, checkpointed, settable, recorded, moves)
+#define CPS_WT_OWN_FIELDS(X) \
+  X(scattered, int, 1, "fluid", true, false, false, true)  /* 1: touched the airfoil since it (re-)entered */
+#define CPS_WT_FIELDS(X) CPS_DEM_MOVING_FIELDS(X) CPS_WT_OWN_FIELDS(X) CPS_DEM_STEP_FIELDS(X)
 
 // X(name, C type, count, member of Scene, checkpointed)
 #define CPS_WT_SCALARS(X) \
@@ -43,3 +39,17 @@
 #define CPS_WT_CONTROLS(X)              \
   X(speed_scale, float, 1, speed_scale) \
   X(pitch, float, 1, pitch)
+
+namespace cps::wt {
+
+// structure of arrays; particles sorted by cell every step: the spheres' fields (dem::Arrays),
+// the tunnel's own, a reorder that gathers every moving field of the table, and the step's
+template <int D>
+struct Arrays : dem::Arrays<D> {
+  CPS_FIELD_MEMBERS(CPS_WT_OWN_FIELDS)
+  CPS_FIELD_GATHER(CPS_WT_FIELDS)
+  StepSums<D>* items;
+  int* leaving;      // this step's leaving particles (slots; -1 once placed on the conveyor)
+};
+
+}  // namespace cps::wt
