@@ -26,3 +26,14 @@ def test_spatial_includes_only_core_and_spatial():
     assert any(dep == "core" for _, dep in found)
     above = [(h, dep) for h, dep in found if dep not in ("core", "spatial")]
     assert above == [], above
+
+
+def test_physics_and_dem_do_not_reach_into_the_engine_or_scenes():
+    # physics: formulas on plain values
+    above = [(h, dep) for h, dep in includes("physics") if dep not in ("core", "physics")]
+    assert above == [], above
+    # dem: the soft-sphere stages every DEM kind shares; of sim/ only the parameter reader and
+    # the clock (its field rows and pointers come from core/field_ptrs.h)
+    pattern = re.compile(r'^\s*#\s*include\s+"corpuscle/(sim/[a-z_]+\.h|scenes/)', re.M)
+    reached = sorted({m.group(1) for h in (ROOT / "dem").glob("*.h") for m in pattern.finditer(h.read_text())})
+    assert set(reached) <= {"sim/params.h", "sim/table.h"}, reached
