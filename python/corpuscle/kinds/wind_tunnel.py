@@ -163,12 +163,17 @@ def keys_3d(defaults: dict[str, int], end_time: float, span: float) -> dict[str,
 
 
 def _channel_room(values: dict[str, Any], arrays) -> None:
-    le = values["airfoil.leading_edge"]
-    L, H = values["channel.length"], values["channel.height"]
-    c = values["airfoil.chord"]
-    if not (-L / 2 < le[0] < L / 2 and -H / 2 < le[1] < H / 2 and le[0] + c < L / 2):
-        raise SceneError(f"airfoil.leading_edge = {_fmt_value(le)} with airfoil.chord = {_fmt_value(c)} must lie "
-                         f"inside the channel ({_fmt_value(L)} x {_fmt_value(H)} centred on the origin)")
+    """The placed airfoil (chord, angle of attack and leading edge applied: what the run
+    builds) lies inside the channel; the 3-D kind's section spans z, so x and y decide."""
+    L, H = float(values["channel.length"]), float(values["channel.height"])
+    poly = airfoil_polygon(values)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    if not (lo[0] > -L / 2 and hi[0] < L / 2 and lo[1] > -H / 2 and hi[1] < H / 2):
+        placed = ", ".join(f"{k} = {_fmt_value(values[k])}" for k in
+                           ("airfoil.leading_edge", "airfoil.chord", "airfoil.angle_of_attack"))
+        raise SceneError(f"{placed}: the placed airfoil spans x {lo[0]:.4g} .. {hi[0]:.4g} m, y {lo[1]:.4g} .. "
+                         f"{hi[1]:.4g} m, not inside the channel (channel.length = {_fmt_value(L)}, channel.height = "
+                         f"{_fmt_value(H)}: x within +-{L / 2:.4g} m, y within +-{H / 2:.4g} m)")
 
 
 def _one_thermal(values: dict[str, Any], arrays) -> None:
