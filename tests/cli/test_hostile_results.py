@@ -51,3 +51,79 @@ def test_wind_tunnel_airfoil_past_the_wall_is_one_line_on_the_cli():
     proc = run_cli("run", "wind-tunnel", "--set", "airfoil.leading_edge=[-1.2, 0.6]",
                    "--set", "airfoil.angle_of_attack=-90", "--steps", "1", "--no-progress")
     assert_one_line_error(proc, "not inside the channel")
+
+
+# --- what cannot be measured is refused or reported missing, never a made-up 0 ---------------
+
+# (scene, probe position): outside the tank, where a probe has no fluid to sample
+PROBES_OUTSIDE = [
+    ("dam-break-2d", [5.0, 0.1]),     # past the far wall (the tank is 5 a = 0.73 m long)
+    ("dam-break-2d", [-0.01, 0.1]),   # behind the back wall
+    ("dam-break-2d", [0.1, 9.0]),     # above the lid
+    ("dam-break", [0.7, 0.5, 0.02]),  # beyond the depth (0.5 a = 0.073 m)
+    ("fluid-box", [0.5, 0.5, 1.5]),   # above the 1 m box
+    ("fluid-box", [0.5, -1e-3, 0.1]),
+]
+
+
+@pytest.mark.parametrize("scene, position", PROBES_OUTSIDE)
+def test_probe_outside_the_tank_is_refused_at_load(scene, position):
+    with pytest.raises(SceneError, match=r"^probes\[0\]\.position = .* \('p'\) is outside the tank"):
+        load_scene(scene).with_overrides({"probes": [{"name": "p", "position": position}]})
+
+
+def test_probe_inside_the_tank_is_accepted():
+    s = load_scene("dam-break-2d").with_overrides({"probes": [{"name": "p", "position": [0.7, 0.36]}]})
+    assert s.arrays["probes"][0]["position"] == [0.7, 0.36]
+
+
+def test_probe_outside_the_tank_is_one_line_on_the_cli():
+    proc = run_cli("run", "dam-break-2d", "--set", 'probes=[{name="far", position=[5.0, 0.1]}]', "--steps", "1")
+    assert_one_line_error(proc, "probes[0].position = [5.0, 0.1] ('far') is outside the tank")
+
+
+def test_probe_without_fluid_near_reports_missing_not_zero():
+    # in the tank's empty top corner no particle is within the kernel's support: the pressure
+    # was reported as 0.0 Pa, a number nobody measured
+    sim = corpuscle.Simulation.from_scene(
+        "dam-break-2d", backend="serial", particles=200,
+        overrides={"probes": [{"name": "air", "position": [0.7, 0.36]}, {"name": "low", "position": [0.05, 0.02]}]})
+    sim.step(5)
+    probes = sim.state()["probes"]
+    assert math.isnan(probes["air"]["pressure"]) and all(math.isnan(v) for v in probes["air"]["velocity"])
+    assert math.isfinite(probes["low"]["pressure"]) and probes["low"]["pressure"] > 0
+    result = sim.result()
+    assert math.isnan(result["probe_air_p"])
+    lines, rest = sim.kind.summary(result)
+    assert any("probe_air_p" in line and "not measured" in line for line in lines)
+    assert "probe_air_p" not in rest and "probe_low_p" in rest
+
+
+def test_wind_tunnel_coefficients_nobody_measured_are_missing():
+    # one particle never reaches the airfoil: C_L = 0 +- 0 was printed as a measurement
+    sim = corpuscle.Simulation.from_scene("wind-tunnel", backend="serial", particles=1,
+                                          overrides={"run.end_time": 0.2})
+    sim.run(until=0.2)
+    r = sim.result()
+    assert r["blocks"] > 1
+    assert all(math.isnan(r[k]) for k in ("cl", "cd", "cm", "cl_se", "lift", "drag", "moment"))
+    assert "no particle touched the airfoil" in r["not_measured"]
+    lines, rest = sim.kind.summary(r)
+    assert lines[0].startswith("C_L, C_D, C_M: not measured (no particle touched the airfoil")
+    assert "cl" not in rest and "lift" not in rest
+
+
+def test_polar_with_one_particle_prints_no_coefficient(tmp_path):
+    proc = run_cli("polar", "wind-tunnel", "--aoa", "5", "--particles", "1", "--end-time", "0.2", "--no-plot",
+                   "--out", tmp_path / "p")
+    assert proc.returncode == 0, proc.stderr
+    assert "C_L 0 ± 0" not in proc.stderr and "not measured (no particle touched the airfoil" in proc.stderr
+    row = (tmp_path / "p.csv").read_text().splitlines()[1].split(",")
+    assert row[1] == "nan"  # cl: no number
+
+
+def test_run_json_has_null_for_what_was_not_measured(tmp_path):
+    proc = run_cli("run", "wind-tunnel", "--particles", "1", "--time", "0.2", "--json", "--out", tmp_path / "w.cps")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)["result"]
+    assert result["cl"] is None and result["lift"] is None and "touched" in result["not_measured"]

@@ -260,15 +260,14 @@ class WindTunnel(Kind):
                 v, e = result.get(k), result.get(k + "_se")
                 return f"{v:.4g} ± {e:.2g}" if v is not None and e is not None and math.isfinite(e) else f"{v:.4g}"
             blocks = result.get("blocks", 0)
-            if blocks > 0:
+            if not result.get("not_measured"):
                 lines.append(f"C_L = {pm('cl')}, C_D = {pm('cd')}, C_M = {pm('cm')} "
                              f"(over {blocks} block{'s' if blocks > 1 else ''} from t = {result['measure_start']:.4g} s"
                              + ("; no error estimate from one block)" if blocks == 1 else ")"))
             else:
                 # nothing measured (null in --json): the means and their errors are not printed as nan rows
-                lines.append(f"C_L, C_D, C_M: not measured (the run ended before the measurement window at "
-                             f"t = {result['measure_start']:.4g} s)")
-                for k in ("lift", "drag", "moment", "lift_se", "drag_se", "moment_se"):
+                lines.append(f"C_L, C_D, C_M: not measured ({result['not_measured']})")
+                for k in ("lift", "drag", "moment", "lift_se", "drag_se", "moment_se", "not_measured"):
                     rest.pop(k, None)
             for k in ("cl", "cd", "cm", "cl_se", "cd_se", "cm_se"):
                 rest.pop(k, None)
@@ -384,12 +383,23 @@ class WindTunnel(Kind):
         nb = int(s["nblocks"])
         out: dict[str, Any] = {"blocks": nb, "block_time": float(s["block_len"])}
         span = float(sim.info["span"]) if self.dim == 3 else 1.0  # per unit span (3-D: the whole span's / span)
+        touched = False
         for name, key in (("lift", "blocks_lift"), ("drag", "blocks_drag"), ("moment", "blocks_moment")):
             b = np.asarray(s[key], dtype=np.float64)[:nb]
             if self.dim == 3:
                 b = b / span
+            touched = touched or bool(np.any(b != 0.0))
             out[name] = float(b.mean()) if nb else float("nan")
             out[name + "_se"] = float(b.std(ddof=1) / math.sqrt(nb)) if nb > 1 else float("nan")
+        # why nothing was measured (the means are then NaN: null in JSON), or None
+        t0 = float(sim.info["measure_start"])
+        out["not_measured"] = (f"the run ended before the measurement window at t = {t0:.4g} s" if not nb else
+                               None if touched else
+                               f"no particle touched the airfoil in the measurement window from t = {t0:.4g} s: "
+                               f"its force was exactly 0 in every block")
+        if out["not_measured"]:
+            for name in ("lift", "drag", "moment"):
+                out[name] = out[name + "_se"] = float("nan")
         return out
 
     def result(self, sim, s: dict[str, Any]) -> dict[str, Any]:
@@ -402,6 +412,7 @@ class WindTunnel(Kind):
                "cl": co["cl"], "cd": co["cd"], "cm": co["cm"],
                "cl_se": av["lift_se"] / (q * c), "cd_se": av["drag_se"] / (q * c), "cm_se": av["moment_se"] / (q * c * c),
                "blocks": av["blocks"], "measure_start": sim.info["measure_start"],
+               **({"not_measured": av["not_measured"]} if av["not_measured"] else {}),
                "recycled": int(s["recycled"]), "pushouts": int(s["pushouts"])}
         if not int(sim.scene.values["gas.particles"]):
             out["particles_note"] = (f"{sim.n_particles:,} particles (the {sim.backend} default; "
