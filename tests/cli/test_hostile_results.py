@@ -127,3 +127,94 @@ def test_run_json_has_null_for_what_was_not_measured(tmp_path):
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)["result"]
     assert result["cl"] is None and result["lift"] is None and "touched" in result["not_measured"]
+
+
+# --- a restored state's scalars are checked as the API's arguments are -----------------------
+
+NAN, INF = float("nan"), float("inf")
+
+# (scene, key, value): a crafted checkpoint (valid arrays) with one scalar nobody could reach;
+# a NaN time made every step a no-op that exited 0
+BAD_SCALARS = [
+    ("magic8ball", "time", NAN),
+    ("magic8ball", "time", INF),
+    ("magic8ball", "time", -1.0),
+    ("magic8ball", "step", -1),
+    ("magic8ball", "step", 2**64),
+    ("magic8ball", "step", 1e30),
+    ("magic8ball", "step", 2.5),
+    ("magic8ball", "dt", NAN),
+    ("magic8ball", "dt", -1e-3),
+    ("magic8ball", "sums_ke", INF),
+    ("magic8ball", "sums_ke", 1e300),          # finite in float64, inf in the core's float32
+    ("magic8ball", "rebuilds", -5),
+    ("magic8ball", "die_position", [0.0, NAN, 0.0]),
+    ("magic8ball", "die_orientation", [1.0, 0.0]),
+    ("magic8ball", "control_acceleration", [1e30, 0.0, 0.0]),
+    ("magic8ball", "control_torque", [0.0, 0.0, NAN]),
+    ("magic8ball", "spacing", NAN),
+    ("wind-tunnel", "time", NAN),
+    ("wind-tunnel", "nblocks", -1),
+    ("wind-tunnel", "block_len", INF),
+    ("wind-tunnel", "control_pitch", 1e9),
+    ("dam-break-2d", "time", -0.5),
+    ("dam-break-2d", "sums_nbrs", 2**70),
+    ("dam-break-2d", "control_acceleration", [0.0, INF, 0.0]),
+]
+
+_CHECKPOINTS = {}
+
+
+def _checkpoint(scene):
+    if scene not in _CHECKPOINTS:
+        sim = corpuscle.Simulation.from_scene(scene, backend="serial", particles=300 if scene != "dam-break-2d" else 200)
+        sim.step(3)
+        _CHECKPOINTS[scene] = (sim, sim.checkpoint())
+    return _CHECKPOINTS[scene]
+
+
+@pytest.mark.parametrize("scene, key, value", BAD_SCALARS)
+def test_restore_checks_every_scalar(scene, key, value):
+    sim, good = _checkpoint(scene)
+    before = sim.checkpoint()
+    state = dict(good, **{key: value})
+    with pytest.raises(ValueError, match=rf"^checkpoint {'control' if key.startswith('control_') else key}\b") as e:
+        sim.restore(state)
+    assert "\n" not in str(e.value)
+    # nothing was restored: the state is the one before
+    after = sim.checkpoint()
+    assert after["time"] == before["time"] and after["step"] == before["step"] and sim.control == {
+        k[len("control_"):]: list(np.atleast_1d(v)) for k, v in before.items() if k.startswith("control_")}
+
+
+def test_restore_takes_a_good_checkpoint():
+    sim, good = _checkpoint("magic8ball")
+    sim.restore(dict(good))
+    assert sim.steps == good["step"] and sim.time == good["time"]
+
+
+def _crafted_run(tmp_path, key, value):
+    """A recorded magic8ball run whose last checkpoint's state.<key> is `value` (valid checksums)."""
+    from corpuscle import io
+
+    src, out = tmp_path / "a.cps", tmp_path / "crafted.cps"
+    proc = run_cli("run", "magic8ball", "--particles", "300", "--backend", "serial", "--steps", "20", "--every", "10",
+                   "--checkpoint-every", "10", "--out", src, "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    with io.open(src) as run, io.FrameWriter(out, dict(run.header)) as w:
+        for i in range(len(run)):
+            f = run[i]
+            fields = {k: np.array(v) for k, v in f.fields.items()}
+            if f.kind == "checkpoint" and i == len(run) - 1:
+                fields[f"state.{key}"] = np.array([value], dtype=fields[f"state.{key}"].dtype)
+            w.write_frame(f.step, f.time, f.dt, fields, groups=dict(f.groups), rigid=f.rigid,
+                          diagnostics=f.diagnostics, kind=f.kind)
+    return out
+
+
+@pytest.mark.parametrize("key, value", [("time", NAN), ("time", -1.0), ("step", -3)])
+def test_resume_of_a_crafted_checkpoint_is_one_line(tmp_path, key, value):
+    crafted = _crafted_run(tmp_path, key, value)
+    proc = run_cli("run", "--resume", crafted, "--steps", "10", "--out", tmp_path / "b.cps", "--no-progress")
+    assert_one_line_error(proc, f"checkpoint {key} = ")
+    assert not (tmp_path / "b.cps").exists()
