@@ -218,3 +218,58 @@ def test_resume_of_a_crafted_checkpoint_is_one_line(tmp_path, key, value):
     proc = run_cli("run", "--resume", crafted, "--steps", "10", "--out", tmp_path / "b.cps", "--no-progress")
     assert_one_line_error(proc, f"checkpoint {key} = ")
     assert not (tmp_path / "b.cps").exists()
+
+
+# --- one control bound for every entry point -------------------------------------------------
+
+# (entry point, the call): 1e30 m/s² was taken by Batch and the env, refused by Simulation only
+BEYOND_THE_CONTROL_BOUND = [
+    ("Batch acceleration", lambda b: b.set_control(np.array([[1e30, 0, 0, 0, 0, 0], [0] * 6]))),
+    ("Batch acceleration at 1.5e4", lambda b: b.set_control(np.array([[0] * 6, [0, -1.5e4, 0, 0, 0, 0]]))),
+    ("Batch torque", lambda b: b.set_control(np.array([[0] * 6, [0, 0, 0, 0, 0, 2e6]]))),
+]
+
+
+@pytest.fixture(scope="module")
+def batch():
+    return corpuscle.Batch.from_scene("magic8ball", n=2, backend="serial", particles=200, settle=0.0)
+
+
+@pytest.mark.parametrize("what, call", BEYOND_THE_CONTROL_BOUND, ids=[w for w, _ in BEYOND_THE_CONTROL_BOUND])
+def test_batch_control_beyond_the_bound_is_refused(batch, what, call):
+    with pytest.raises(ValueError, match=r"^actions\[\d, \d\] \((acceleration|torque)_[xyz]\) must be in "
+                                         r"\[-(10000|1e\+06), (10000|1e\+06)\] (m/s²|N·m), got "):
+        call(batch)
+    # the bound itself is taken, as Simulation.set_control takes it
+    batch.set_control(np.array([[1e4, 0, 0, 0, 0, -1e6]] * 2))
+
+
+@pytest.mark.parametrize("kw", [{"max_acceleration": 1e30}, {"max_acceleration": 2e4}, {"max_torque": 1e7}])
+def test_env_scale_beyond_the_control_bound_is_refused(kw):
+    pytest.importorskip("gymnasium")
+    from corpuscle.envs import Magic8BallVectorEnv
+
+    name = next(iter(kw))
+    with pytest.raises(ValueError, match=rf"^{name} must be in \(0, (10000|1e\+06)\] (m/s²|N·m), got "):
+        Magic8BallVectorEnv(num_envs=1, particles=200, backend="serial", settle=0.0, **kw)
+
+
+@pytest.mark.parametrize("scene, kw", [
+    ("dam-break-2d", {"acceleration": (1e30, 0.0)}),      # the SPH kinds took any finite acceleration
+    ("dam-break-2d", {"acceleration": (0.0, -2e4)}),
+    ("fluid-box", {"acceleration": (0.0, 0.0, 1e5)}),
+    ("magic8ball", {"acceleration": (0.0, 0.0, 1.5e4)}),
+])
+def test_simulation_control_beyond_the_bound_is_refused(scene, kw):
+    sim = corpuscle.Simulation.from_scene(scene, backend="serial", particles=200 if scene != "magic8ball" else 300)
+    with pytest.raises(ValueError, match=r"^acceleration must be 3 numbers each in \[-10000, 10000\] m/s², got "):
+        sim.set_control(**kw)
+    assert sim.control["acceleration"] == [0.0, 0.0, 0.0]
+
+
+def test_the_bound_is_the_shake_windows_bound():
+    from corpuscle.kinds import CONTROL_BOUNDS
+    from corpuscle.kinds.magic8ball import SHAKE_KEYS
+
+    for name, (bound, unit) in CONTROL_BOUNDS.items():
+        assert (SHAKE_KEYS[name].lo, SHAKE_KEYS[name].hi, SHAKE_KEYS[name].unit) == (-bound, bound, unit)

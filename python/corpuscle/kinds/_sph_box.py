@@ -354,12 +354,13 @@ class SphBox(Kind):
                 "units": dict(self.units)}
 
     def control(self, sim, acceleration=(0.0, 0.0, 0.0)) -> dict[str, list[float]]:
-        """A body acceleration (m/s^2) added to gravity from the next step on (shaking, tilting)."""
-        from . import finite_vector
+        """A body acceleration (m/s^2) added to gravity from the next step on (shaking, tilting),
+        each component within CONTROL_BOUNDS's."""
+        from . import bounded_control
         a = list(acceleration)
         if len(a) == self.dim:
             a = a + [0.0] * (3 - self.dim)
-        return {"acceleration": finite_vector("acceleration", a, 3)}
+        return {"acceleration": bounded_control("acceleration", a, 3)}
 
     def set_particles(self, sim, positions, velocities=None) -> None:
         from . import particle_array
