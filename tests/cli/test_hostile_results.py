@@ -273,3 +273,48 @@ def test_the_bound_is_the_shake_windows_bound():
 
     for name, (bound, unit) in CONTROL_BOUNDS.items():
         assert (SHAKE_KEYS[name].lo, SHAKE_KEYS[name].hi, SHAKE_KEYS[name].unit) == (-bound, bound, unit)
+
+
+# --- a value that begins as a negative number is a value, for every option ------------------
+
+# argparse took anything after '-' but -12 and -1.5 for an option name: "expected one argument"
+NEGATIVE_VALUES = [
+    ["polar", "wind-tunnel", "--aoa", "-10:20:2"],
+    ["polar", "wind-tunnel", "--aoa", "-5,0,5"],
+    ["render", "r.cps", "-o", "a.png", "--camera", "-30,20"],
+    ["render", "r.cps", "-o", "a.png", "--camera", "-30,-20,2"],
+    ["render", "r.cps", "-o", "a.mp4", "--frames", "-3:"],
+    ["render", "r.cps", "-o", "a.png", "--range", "-1e3:1e3"],
+    ["export", "r.cps", "--format", "vtk", "out", "--frames", "-3:"],
+    ["validate", "dam-break", "--particles", "-3e3"],
+    ["run", "magic8ball", "--time", "-1e3"],
+    ["run", "magic8ball", "--steps", "-.5e1"],
+]
+
+
+@pytest.mark.parametrize("argv", NEGATIVE_VALUES, ids=" ".join)
+def test_negative_looking_values_reach_the_option(argv, capsys):
+    from corpuscle.cli import build_parser
+    from corpuscle.cli.validate import options_parser
+
+    try:
+        args = build_parser().parse_args(argv)
+        if args.command == "validate":
+            assert args.options == argv[2:]
+            options_parser(args.name)[1].parse_known_args(args.options)
+    except SystemExit:
+        pytest.fail(f"corpuscle {' '.join(argv)}: {capsys.readouterr().err.strip()}")
+    option = argv[-2].lstrip("-").replace("-", "_")
+    if args.command != "validate":
+        assert getattr(args, option) == argv[-1]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["run", "magic8ball", "--time", "-1e3"], "--time -1000: run.end_time must be"),
+    (["polar", "wind-tunnel", "--aoa", "-100:20:2"], "--aoa '-100:20:2'"),
+    (["validate", "wind-tunnel", "--alpha", "-10,10"], "--alpha angles must lie in [0, 60] degrees, got '-10,10'"),
+    (["validate", "dam-break", "--particles", "-3e3"], "--particles must be a positive integer, got '-3e3'"),
+])
+def test_a_negative_value_out_of_range_is_named(argv, words):
+    # the option's own check names it (not argparse's "expected one argument")
+    assert_one_line_error(run_cli(*argv), words)
