@@ -337,12 +337,20 @@ class Batch:
             raise ValueError(f"actions must be a ({self.n_scenes}, {self._controls}) array, got shape {a.shape}")
         if a.dtype.kind not in "iuf":
             raise ValueError(f"actions must be numbers, got dtype {a.dtype}")
-        a = np.ascontiguousarray(a, dtype=np.float32)
+        a = np.asarray(a, dtype=np.float64)
         bad = ~np.isfinite(a)
         if bad.any():
             s, c = (int(x) for x in np.argwhere(bad)[0])
             raise ValueError(f"actions[{s}, {c}] ({CONTROL_COLUMNS[c]}) must be finite, got {actions[s][c]!r}")
-        return a
+        # the bounds Simulation.set_control takes (one table for every entry point)
+        bounds = np.array([_kinds.CONTROL_BOUNDS[c.rsplit("_", 1)[0]][0] for c in CONTROL_COLUMNS])
+        out = np.abs(a) > bounds
+        if out.any():
+            s, c = (int(x) for x in np.argwhere(out)[0])
+            name = CONTROL_COLUMNS[c].rsplit("_", 1)[0]
+            raise ValueError(f"actions[{s}, {c}] ({CONTROL_COLUMNS[c]}) must be in [{-bounds[c]:g}, {bounds[c]:g}] "
+                             f"{_kinds.CONTROL_BOUNDS[name][1]}, got {a[s, c]:g}")
+        return np.ascontiguousarray(a, dtype=np.float32)
 
     def reset(self, mask=None, randomize: bool | None = None) -> np.ndarray:
         """Restore the chosen scenes (a boolean mask of length B, or scene indices; None:

@@ -36,12 +36,23 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .batch import Batch
+from .kinds import CONTROL_BOUNDS
 
 __all__ = ["Magic8BallVectorEnv", "Magic8BallEnv", "OBSERVATION_COLUMNS"]
 
 #: what each column of an observation is
 OBSERVATION_COLUMNS = ("die_x", "die_y", "die_z", "die_qw", "die_qx", "die_qy", "die_qz", "die_vx", "die_vy", "die_vz",
                        "die_wx", "die_wy", "die_wz", "episode_fraction")
+
+
+def _bounded(control: str, value) -> float:
+    """max_<control>: positive and within the control's bound (CONTROL_BOUNDS), as every
+    entry point's."""
+    v = _positive(f"max_{control}", value)
+    bound, unit = CONTROL_BOUNDS[control]
+    if v > bound:
+        raise ValueError(f"max_{control} must be in (0, {bound:g}] {unit}, got {value!r}")
+    return v
 
 
 def _positive(name: str, value) -> float:
@@ -78,8 +89,8 @@ class Magic8BallVectorEnv(VectorEnv):
             raise ValueError(f"episode_time ({episode_time}) must be a whole number of control periods "
                              f"({control_period})")
         #: an action's scale: m/s² (3) and N·m (3) at 1
-        self.action_scale = np.array([_positive("max_acceleration", max_acceleration)] * 3 +
-                                     [_positive("max_torque", max_torque)] * 3, dtype=np.float32)
+        self.action_scale = np.array([_bounded("acceleration", max_acceleration)] * 3 +
+                                     [_bounded("torque", max_torque)] * 3, dtype=np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(6,), dtype=np.float32)
         batch_kwargs.setdefault("shake", [])  # the agent shakes; no scheduled shakes
         if seed is not None:

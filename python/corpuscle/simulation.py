@@ -118,6 +118,65 @@ def _check_state(state) -> None:
 
 
 
+# the scalars a state's clock reads: a time in seconds and a step count start at 0
+_NOT_NEGATIVE = ("time", "dt")
+
+
+def _scalar_numbers(label: str, value, count: int) -> list:
+    """``count`` numbers (one, or a list of them) of a restored state's scalar."""
+    vals = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+    if len(vals) != count or any(isinstance(x, (bool, np.bool_)) or not isinstance(x, numbers.Real) for x in vals):
+        what = "a number" if count == 1 else f"{count} numbers"
+        raise ValueError(f"{label} must be {what}, got {value!r}")
+    return vals
+
+
+def _check_restored_scalar(label: str, name: str, value, dtype: np.dtype, count: int) -> None:
+    """One scalar of a restored state, checked as the API checks its arguments: a float
+    finite (and within float32 where the core keeps float32; a time or dt not negative), an
+    integer whole and within the core's type, not negative (a step, a count, an index)."""
+    vals = _scalar_numbers(label, value, count)
+    if dtype.kind == "f":
+        top = float(np.finfo(dtype).max)
+        for x in vals:
+            if not (math.isfinite(float(x)) and abs(float(x)) <= top):
+                raise ValueError(f"{label} = {value!r} must be finite" + (" (float32)" if dtype.itemsize == 4 else ""))
+            if name in _NOT_NEGATIVE and float(x) < 0:
+                raise ValueError(f"{label} = {value!r} must not be negative")
+    else:
+        top = int(np.iinfo(dtype).max)
+        for x in vals:
+            if isinstance(x, float) and not x.is_integer() or not 0 <= x <= top:
+                raise ValueError(f"{label} = {value!r} must be a whole number in [0, {top}]")
+
+
+def _check_restored_scalars(sim, state: Mapping) -> None:
+    """Every scalar of a checkpoint ``sim`` is about to take (the core's record values, the
+    control input and the kind's extras) before any of it is restored."""
+    fields = {f["name"] for f in sim._fields}
+    for name in sim.kind.checkpoint_extra:
+        if name in state:
+            _check_restored_scalar(f"checkpoint {name}", name, state[name], np.dtype(np.float64), 1)
+    controls = {}
+    for key, value in state.items():
+        if key in fields or key in sim.kind.checkpoint_extra or not isinstance(key, str):
+            continue
+        if key.startswith("control_") and key[len("control_"):] in sim._control:
+            controls[key[len("control_"):]] = value
+            continue
+        try:
+            ref = np.asarray(sim.core.scalar_of_scenes(key))  # (1,) or (1, count): the record's dtype
+        except KeyError:
+            continue  # not a scalar of this kind's record: the core does not read it
+        _check_restored_scalar(f"checkpoint {key}", key, value, ref.dtype, int(ref.size))
+    if controls:
+        try:  # the control input as set_control takes it (its bounds included)
+            sim.kind.control(sim, **{k: _scalar_numbers(f"checkpoint control_{k}", v, len(sim._control[k]))
+                                     for k, v in controls.items()})
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"checkpoint control: {e}") from None
+
+
 def _bad_step(s: dict) -> int:
     """The step a snapshot went bad at; a flag raised outside a step (by ``evaluate``, which
     runs no finalize to note the step) is the current one."""
@@ -345,6 +404,7 @@ class Simulation:
                 if arr.dtype.kind not in "iu" or arr.shape != shape:
                     raise ValueError(f"checkpoint {name} must be an {shape} array of integers, got shape {arr.shape}")
                 arrays[name] = np.ascontiguousarray(arr, dtype=np.dtype(f["dtype"]))
+        _check_restored_scalars(self, state)
         skip = {f["name"] for f in self._fields} | set(self.kind.checkpoint_extra)
         full = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in state.items() if k not in skip}
         full.update(arrays)

@@ -215,8 +215,20 @@ def live_url_message(server, what: str) -> str:
 
 
 
+# a value that begins as a negative number does (-10:20:2, -30,20, -3:, -.5, -1e3): argparse's
+# own pattern takes only -12 and -1.5 as values, anything else after '-' as an option name, so
+# `--aoa -10:20:2` failed with "expected one argument" (no option name starts with '-' and a digit)
+NEGATIVE_VALUE = re.compile(r"^-\.?\d")
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with usage errors on one line: the message and where to find the usage."""
+    """argparse with usage errors on one line: the message and where to find the usage; a
+    value that begins as a negative number does is a value, for every option
+    (:data:`NEGATIVE_VALUE`)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str):  # noqa: D401 - argparse's hook
         self.exit(EXIT_USAGE, f"{PROG}: error: {one_line(message)} (see `{self.prog} --help`)\n")

@@ -67,8 +67,10 @@ def run_command(args: argparse.Namespace) -> int:
             row[k] = r.get(k, float("nan"))
         rows.append(row)
         if not args.no_progress:
-            print(f"alpha {a:7.3f} deg: C_L {row['cl']:.4g} ± {row['cl_se']:.2g}, C_D {row['cd']:.4g} ± "
-                  f"{row['cd_se']:.2g} ({row['steps']} steps, {time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+            measured = (f"C_L, C_D: not measured ({r['not_measured']})" if r.get("not_measured") else
+                        f"C_L {row['cl']:.4g} ± {row['cl_se']:.2g}, C_D {row['cd']:.4g} ± {row['cd_se']:.2g}")
+            print(f"alpha {a:7.3f} deg: {measured} ({row['steps']} steps, {time.perf_counter() - t0:.1f} s)",
+                  file=sys.stderr)
         del sim
     csv_path = prefix.with_name(prefix.name + ".csv")
     try:

@@ -19,13 +19,21 @@ def _configure_validate(p: argparse.ArgumentParser) -> None:
     p.add_argument("options", nargs=argparse.REMAINDER, help="the validation's options (NAME --help lists them)")
 
 
+def options_parser(name: str):
+    """(the validation module, the parser of its own options) for ``validate NAME``."""
+    from .. import validation
+
+    module = validation.load(name)  # unknown name: ValueError, one line, exit 2
+    sub = Parser(prog=f"{PROG} validate {name}", description=(module.__doc__ or "").strip().splitlines()[0])
+    sub.add_argument("--json", action="store_true", help="print the checks as JSON (and nothing else) on stdout")
+    module.add_arguments(sub)
+    return module, sub
+
+
 def _cmd_validate(args: argparse.Namespace) -> int:
     from .. import validation
 
-    module = validation.load(args.name)  # unknown name: ValueError, one line, exit 2
-    sub = Parser(prog=f"{PROG} validate {args.name}", description=(module.__doc__ or "").strip().splitlines()[0])
-    sub.add_argument("--json", action="store_true", help="print the checks as JSON (and nothing else) on stdout")
-    module.add_arguments(sub)
+    module, sub = options_parser(args.name)
     opts = sub.parse_args(args.options)  # bad options exit 2 with one line
     if args.json or opts.json:  # the JSON alone on stdout: the runs' own tables go to stderr
         with contextlib.redirect_stdout(sys.stderr):

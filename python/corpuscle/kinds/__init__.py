@@ -125,7 +125,7 @@ from .._errors import MemoryNeedError
 from ..schema import SceneError, SceneKind
 
 __all__ = ["Kind", "Build", "Target", "register", "find", "get", "registry", "count", "finite_vector",
-           "particle_array", "fmt_bytes", "check_memory", "key_values", "kind_method", "core"]
+           "CONTROL_BOUNDS", "bounded_control", "particle_array", "fmt_bytes", "check_memory", "key_values", "kind_method", "core"]
 
 # the run keys every kind declares (the CLI's --time and --every set them)
 REQUIRED_KEYS = ("run.end_time", "run.record_every")
@@ -325,6 +325,21 @@ def count(name: str, value, minimum: int = 0, maximum: int = 2**63 - 1) -> int:
     if int(value) > maximum:
         raise ValueError(f"{name} must be <= {maximum}, got {int(value)}")
     return int(value)
+
+
+#: the largest control input, per component, that any kind takes from any entry point
+#: (Simulation.set_control, Batch.set_control, the Gymnasium env, a restored checkpoint), and
+#: the bounds of the 8-ball's [[shake]] window keys: name -> (bound, unit)
+CONTROL_BOUNDS: dict[str, tuple[float, str]] = {"acceleration": (1e4, "m/s²"), "torque": (1e6, "N·m")}
+
+
+def bounded_control(name: str, value, length: int = 3) -> list[float]:
+    """`length` finite numbers each within ``CONTROL_BOUNDS[name]``."""
+    out = finite_vector(name, value, length)
+    bound, unit = CONTROL_BOUNDS[name]
+    if any(not -bound <= x <= bound for x in out):
+        raise ValueError(f"{name} must be {length} numbers each in [{-bound:g}, {bound:g}] {unit}, got {out}")
+    return out
 
 
 def finite_vector(name: str, value, length: int = 3) -> list[float]:

@@ -40,16 +40,19 @@ def _fits(values, arrays) -> None:
                          f"{values['dam.tank_height']} must be >= dam.height = {values['dam.height']} (units of a)")
 
 
+def tank_size(v) -> np.ndarray:
+    """The tank's inner size (m): length and height (2-D), or length, depth and height."""
+    a = float(v["dam.a"])
+    if "dam.depth" not in v:
+        return np.array([v["dam.tank_length"] * a, v["dam.tank_height"] * a])
+    return np.array([v["dam.tank_length"] * a, float(v["dam.depth"]) * a, v["dam.tank_height"] * a])
+
+
 class DamBreakBase(SphBox):
     def geometry(self, v):
         a = float(v["dam.a"])
-        if self.dim == 2:
-            size = np.array([v["dam.tank_length"] * a, v["dam.tank_height"] * a])
-            hi = np.array([a, v["dam.height"] * a])
-        else:
-            d = float(v["dam.depth"]) * a
-            size = np.array([v["dam.tank_length"] * a, d, v["dam.tank_height"] * a])
-            hi = np.array([a, d, v["dam.height"] * a])
+        size = tank_size(v)
+        hi = np.array([a, v["dam.height"] * a]) if self.dim == 2 else np.array([a, size[1], v["dam.height"] * a])
         return size, np.zeros(self.dim), hi
 
     def extra_info(self, v, info):
@@ -73,8 +76,7 @@ class DamBreakBase(SphBox):
         return out
 
     def summary(self, result):
-        rest = dict(result)
-        lines = []
+        lines, rest = super().summary(result)
         if "front" in result:
             lines.append(f"at T = {result['T']:.3g}: surge front Z = x/a = {result['front']:.3f}, "
                          f"column height {result['column']:.3f} a")

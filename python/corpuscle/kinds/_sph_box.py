@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import math
 import weakref
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from ..schema import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
+from ..schema import INT64_MAX, CrossCheck, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
 
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
@@ -111,6 +111,19 @@ def _check_probes(values, arrays) -> None:
         seen.add(name)
     if len(arrays.get("probes", [])) > 64:
         raise SceneError(f"probes: {len(arrays['probes'])} probes, at most 64")
+
+
+def _probes_inside(box: Callable[[dict[str, Any]], Any]) -> CrossCheck:
+    """A probe samples the fluid of the tank: one outside it (box(values): the inner size,
+    from the origin) would measure nothing, and is refused."""
+    def check(values, arrays) -> None:
+        size = np.asarray(box(values), dtype=np.float64)
+        for k, p in enumerate(arrays.get("probes", [])):
+            x = np.asarray(p["position"], dtype=np.float64)
+            if not np.all((x >= 0.0) & (x <= size)):
+                raise SceneError(f"probes[{k}].position = {_fmt_value(p['position'])} ({p['name']!r}) is outside the "
+                                 f"tank (0 .. {_fmt_value(size.tolist())} m): a probe there measures nothing")
+    return check
 
 
 def lattice(lo_cells, hi_cells, dp: float) -> np.ndarray:
@@ -260,9 +273,14 @@ class SphBox(Kind):
         s = sim.core.scalars() if s is None else s
         out = {}
         p, vel, w = s["probe_pressure"], s["probe_velocity"], s["probe_weight"]
+        nan = float("nan")
         for k, name in enumerate(sim.info["probe_names"]):
-            out[name] = {"position": sim.info["probe_positions"][k].tolist(), "pressure": float(p[k]),
-                         "velocity": [float(x) for x in vel[3 * k:3 * k + self.dim]], "weight": float(w[k])}
+            # no particle within the kernel's support: nothing measured (NaN; null in JSON), not 0
+            seen = float(w[k]) > 0.0
+            out[name] = {"position": sim.info["probe_positions"][k].tolist(),
+                         "pressure": float(p[k]) if seen else nan,
+                         "velocity": [float(x) if seen else nan for x in vel[3 * k:3 * k + self.dim]],
+                         "weight": float(w[k])}
         return out
 
     def state(self, sim, s: dict[str, Any]) -> dict[str, Any]:
@@ -303,12 +321,29 @@ class SphBox(Kind):
                                "outside_max": st["outside_max"]}
         series = self._series.get(sim, {})
         for name in sim.info["probe_names"]:
-            ps = series.get(f"probe_{name}_p")
-            if ps:
+            ps = np.asarray(series.get(f"probe_{name}_p", []), dtype=np.float64)
+            ps = ps[np.isfinite(ps)]  # the records that measured something
+            if ps.size:
                 out[f"probe_{name}_p_max"] = float(np.max(ps))
                 out[f"probe_{name}_p_mean"] = float(np.mean(ps))
+            elif f"probe_{name}_p" in series:  # recorded, never near fluid
+                out[f"probe_{name}_p_max"] = out[f"probe_{name}_p_mean"] = float("nan")
             out[f"probe_{name}_p"] = st["probes"][name]["pressure"]
         return out
+
+    def summary(self, result: dict[str, Any]) -> tuple[list[str], dict[str, Any]]:
+        """A probe that measured nothing (no fluid within the kernel's support of it) is
+        named with the reason, not printed as a number."""
+        lines, rest = [], dict(result)
+        names = sorted({k[len("probe_"):-len("_p")] for k in result if k.startswith("probe_") and k.endswith("_p")})
+        for name in names:
+            keys = [f"probe_{name}_p", f"probe_{name}_p_max", f"probe_{name}_p_mean"]
+            missing = [k for k in keys if k in result and not _finite(result[k])]
+            if missing:
+                lines.append(f"{', '.join(missing)}: not measured (no fluid within the kernel support of the probe)")
+                for k in missing:
+                    rest.pop(k)
+        return lines, rest
 
     def header(self, sim) -> dict[str, Any]:
         p = sim.params
@@ -319,12 +354,13 @@ class SphBox(Kind):
                 "units": dict(self.units)}
 
     def control(self, sim, acceleration=(0.0, 0.0, 0.0)) -> dict[str, list[float]]:
-        """A body acceleration (m/s^2) added to gravity from the next step on (shaking, tilting)."""
-        from . import finite_vector
+        """A body acceleration (m/s^2) added to gravity from the next step on (shaking, tilting),
+        each component within CONTROL_BOUNDS's."""
+        from . import bounded_control
         a = list(acceleration)
         if len(a) == self.dim:
             a = a + [0.0] * (3 - self.dim)
-        return {"acceleration": finite_vector("acceleration", a, 3)}
+        return {"acceleration": bounded_control("acceleration", a, 3)}
 
     def set_particles(self, sim, positions, velocities=None) -> None:
         from . import particle_array
@@ -358,8 +394,15 @@ def column_height(pos: np.ndarray, dp: float) -> float:
     return float(pos[near, -1].max() + 0.5 * dp) if near.any() else 0.0
 
 
-def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int, checks=()) -> SceneKind:
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and math.isfinite(x)
+
+
+def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int, checks=(), *,
+                box: Callable[[dict[str, Any]], Any]) -> SceneKind:
+    """The kind's schema; ``box(values)`` is the tank's inner size (what probes must lie in)."""
     return SceneKind(name=name, description=description, keys=keys, arrays={"probes": probe_keys(dim)},
                      required_in_arrays={"probes": ("name", "position")},
-                     checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_lanes, *checks])
+                     checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_lanes, *checks,
+                             _probes_inside(box)])
 

@@ -30,7 +30,7 @@ class FluidBox(SphBox):
     name = "fluid-box"
     dim = 3
     schema = make_schema("fluid-box", "a block of SPH fluid released in a closed box (seed 002)", KEYS, 3,
-                         [_block_inside])
+                         [_block_inside], box=lambda v: v["box.size"])
     default_particles = {"cuda": 1_048_576, "cpu": 4096, "serial": 4096}
 
     def geometry(self, v):

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..schema import INT32_MAX, INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le, check_windows
-from . import Build, Kind, Target, check_memory, core, finite_vector, key_values
+from . import CONTROL_BOUNDS, Build, Kind, Target, bounded_control, check_memory, core, finite_vector, key_values
 
 __all__ = ["KIND", "Magic8Ball", "MAGIC8BALL_KEYS", "SHAKE_KEYS", "DEFAULT_ANSWERS", "DIE_FACES", "UNSTABLE_REASONS"]
 
@@ -112,8 +112,12 @@ del _K
 SHAKE_KEYS: dict[str, KeySpec] = {
     "start": KeySpec("float", 0.0, "s", 0.0, 1e6, "time the shake starts (required)"),
     "end": KeySpec("float", 0.0, "s", 0.0, 1e6, "time the shake ends (required)", lo_open=True),
-    "acceleration": KeySpec("vec3", [0.0, 0.0, 0.0], "m/s²", -1e4, 1e4, "container linear acceleration"),
-    "torque": KeySpec("vec3", [0.0, 0.0, 0.0], "N·m", -1e6, 1e6, "torque applied to the container shell"),
+    # the bounds of every control input (CONTROL_BOUNDS)
+    "acceleration": KeySpec("vec3", [0.0, 0.0, 0.0], CONTROL_BOUNDS["acceleration"][1],
+                            -CONTROL_BOUNDS["acceleration"][0], CONTROL_BOUNDS["acceleration"][0],
+                            "container linear acceleration"),
+    "torque": KeySpec("vec3", [0.0, 0.0, 0.0], CONTROL_BOUNDS["torque"][1], -CONTROL_BOUNDS["torque"][0],
+                      CONTROL_BOUNDS["torque"][0], "torque applied to the container shell"),
 }
 
 
@@ -375,14 +379,8 @@ class Magic8Ball(Kind):
     def control(self, sim, acceleration=(0.0, 0.0, 0.0), torque=(0.0, 0.0, 0.0)) -> dict[str, list[float]]:
         """Container linear acceleration (m/s²) and shell torque (N·m) for the next steps,
         added to the scene's shake schedule; every backend applies it identically."""
-        out = {"acceleration": finite_vector("acceleration", acceleration),
-               "torque": finite_vector("torque", torque)}
-        for name, values in out.items():  # the bounds of a [[shake]] window's keys
-            spec = SHAKE_KEYS[name]
-            if any(not spec.lo <= x <= spec.hi for x in values):
-                raise ValueError(f"{name} must be 3 numbers each in [{spec.lo:g}, {spec.hi:g}] {spec.unit}, "
-                                 f"got {values}")
-        return out
+        return {"acceleration": bounded_control("acceleration", acceleration),
+                "torque": bounded_control("torque", torque)}
 
     def check_positions(self, sim, positions: np.ndarray) -> None:
         """Every position inside the container."""

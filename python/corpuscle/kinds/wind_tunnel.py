@@ -163,12 +163,17 @@ def keys_3d(defaults: dict[str, int], end_time: float, span: float) -> dict[str,
 
 
 def _channel_room(values: dict[str, Any], arrays) -> None:
-    le = values["airfoil.leading_edge"]
-    L, H = values["channel.length"], values["channel.height"]
-    c = values["airfoil.chord"]
-    if not (-L / 2 < le[0] < L / 2 and -H / 2 < le[1] < H / 2 and le[0] + c < L / 2):
-        raise SceneError(f"airfoil.leading_edge = {_fmt_value(le)} with airfoil.chord = {_fmt_value(c)} must lie "
-                         f"inside the channel ({_fmt_value(L)} x {_fmt_value(H)} centred on the origin)")
+    """The placed airfoil (chord, angle of attack and leading edge applied: what the run
+    builds) lies inside the channel; the 3-D kind's section spans z, so x and y decide."""
+    L, H = float(values["channel.length"]), float(values["channel.height"])
+    poly = airfoil_polygon(values)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    if not (lo[0] > -L / 2 and hi[0] < L / 2 and lo[1] > -H / 2 and hi[1] < H / 2):
+        placed = ", ".join(f"{k} = {_fmt_value(values[k])}" for k in
+                           ("airfoil.leading_edge", "airfoil.chord", "airfoil.angle_of_attack"))
+        raise SceneError(f"{placed}: the placed airfoil spans x {lo[0]:.4g} .. {hi[0]:.4g} m, y {lo[1]:.4g} .. "
+                         f"{hi[1]:.4g} m, not inside the channel (channel.length = {_fmt_value(L)}, channel.height = "
+                         f"{_fmt_value(H)}: x within +-{L / 2:.4g} m, y within +-{H / 2:.4g} m)")
 
 
 def _one_thermal(values: dict[str, Any], arrays) -> None:
@@ -255,15 +260,14 @@ class WindTunnel(Kind):
                 v, e = result.get(k), result.get(k + "_se")
                 return f"{v:.4g} ± {e:.2g}" if v is not None and e is not None and math.isfinite(e) else f"{v:.4g}"
             blocks = result.get("blocks", 0)
-            if blocks > 0:
+            if not result.get("not_measured"):
                 lines.append(f"C_L = {pm('cl')}, C_D = {pm('cd')}, C_M = {pm('cm')} "
                              f"(over {blocks} block{'s' if blocks > 1 else ''} from t = {result['measure_start']:.4g} s"
                              + ("; no error estimate from one block)" if blocks == 1 else ")"))
             else:
                 # nothing measured (null in --json): the means and their errors are not printed as nan rows
-                lines.append(f"C_L, C_D, C_M: not measured (the run ended before the measurement window at "
-                             f"t = {result['measure_start']:.4g} s)")
-                for k in ("lift", "drag", "moment", "lift_se", "drag_se", "moment_se"):
+                lines.append(f"C_L, C_D, C_M: not measured ({result['not_measured']})")
+                for k in ("lift", "drag", "moment", "lift_se", "drag_se", "moment_se", "not_measured"):
                     rest.pop(k, None)
             for k in ("cl", "cd", "cm", "cl_se", "cd_se", "cm_se"):
                 rest.pop(k, None)
@@ -379,12 +383,23 @@ class WindTunnel(Kind):
         nb = int(s["nblocks"])
         out: dict[str, Any] = {"blocks": nb, "block_time": float(s["block_len"])}
         span = float(sim.info["span"]) if self.dim == 3 else 1.0  # per unit span (3-D: the whole span's / span)
+        touched = False
         for name, key in (("lift", "blocks_lift"), ("drag", "blocks_drag"), ("moment", "blocks_moment")):
             b = np.asarray(s[key], dtype=np.float64)[:nb]
             if self.dim == 3:
                 b = b / span
+            touched = touched or bool(np.any(b != 0.0))
             out[name] = float(b.mean()) if nb else float("nan")
             out[name + "_se"] = float(b.std(ddof=1) / math.sqrt(nb)) if nb > 1 else float("nan")
+        # why nothing was measured (the means are then NaN: null in JSON), or None
+        t0 = float(sim.info["measure_start"])
+        out["not_measured"] = (f"the run ended before the measurement window at t = {t0:.4g} s" if not nb else
+                               None if touched else
+                               f"no particle touched the airfoil in the measurement window from t = {t0:.4g} s: "
+                               f"its force was exactly 0 in every block")
+        if out["not_measured"]:
+            for name in ("lift", "drag", "moment"):
+                out[name] = out[name + "_se"] = float("nan")
         return out
 
     def result(self, sim, s: dict[str, Any]) -> dict[str, Any]:
@@ -397,6 +412,7 @@ class WindTunnel(Kind):
                "cl": co["cl"], "cd": co["cd"], "cm": co["cm"],
                "cl_se": av["lift_se"] / (q * c), "cd_se": av["drag_se"] / (q * c), "cm_se": av["moment_se"] / (q * c * c),
                "blocks": av["blocks"], "measure_start": sim.info["measure_start"],
+               **({"not_measured": av["not_measured"]} if av["not_measured"] else {}),
                "recycled": int(s["recycled"]), "pushouts": int(s["pushouts"])}
         if not int(sim.scene.values["gas.particles"]):
             out["particles_note"] = (f"{sim.n_particles:,} particles (the {sim.backend} default; "
