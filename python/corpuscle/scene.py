@@ -57,6 +57,32 @@ from .schema import (  # noqa: F401  (the schema's public names are this module'
 # validation of a whole document
 # ---------------------------------------------------------------------------
 
+#: arrays and tables nest at most this deep in a scene (the deepest key of a kind is a few
+#: levels: a [[shake]] entry's vector is 3); deeper is refused before anything walks it
+MAX_NESTING = 32
+
+
+def _nesting_error(where: str) -> SceneError:
+    return SceneError(f"{where} nests arrays or tables more than {MAX_NESTING} levels deep")
+
+
+def check_nesting(value: Any, where: str) -> None:
+    """Refuse ``value`` nested more than :data:`MAX_NESTING` levels of arrays or tables
+    (walked without recursion, so any depth gives this one-line SceneError, never a
+    RecursionError from a later copy, walk or repr)."""
+    stack = [(value, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, Mapping):
+            children = node.values()
+        elif isinstance(node, (list, tuple)):
+            children = node
+        else:
+            continue
+        if depth >= MAX_NESTING:
+            raise _nesting_error(where)
+        stack.extend((c, depth + 1) for c in children)
+
 
 def _tables_of(keys: Iterable[str]) -> set[str]:
     """Every table prefix of the dotted keys (``a.b.c`` gives ``a`` and ``a.b``)."""
@@ -225,6 +251,7 @@ class Scene:
         builtin: bool = False,
         fallback_name: str = "scene",
     ) -> None:
+        check_nesting(doc, "the scene")
         # the raw document is kept so overrides re-validate everything together
         self._doc = copy.deepcopy(dict(doc))
         self.path = path
@@ -297,6 +324,7 @@ class Scene:
         doc = copy.deepcopy(self._doc)
         for key, value in overrides.items():
             key = str(key).strip()
+            check_nesting(value, key)
             # the [scene] table: name and description only
             if key.startswith("scene.") or key == "scene":
                 leaf = key[len("scene."):] if key.startswith("scene.") else ""
@@ -356,11 +384,16 @@ def _builtin_names() -> list[str]:
 def _parse_toml_bytes(data: bytes, label: str) -> dict[str, Any]:
     """Parse TOML, turning decode and syntax errors into one-line SceneErrors."""
     try:
-        return tomllib.loads(data.decode("utf-8"))
+        doc = tomllib.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise SceneError(f"cannot read scene file {label}: it nests arrays or tables more than {MAX_NESTING} "
+                         f"levels deep") from None
     except UnicodeDecodeError as exc:
         raise SceneError(f"cannot read scene file {label}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"cannot read scene file {label}: {exc}") from None
+    check_nesting(doc, f"scene file {label}")
+    return doc
 
 
 def builtin_scenes() -> list[tuple[str, str]]:
@@ -436,9 +469,14 @@ def parse_set(expr: str) -> tuple[str, object]:
     if not raw:
         raise SceneError(f"--set {key}= has no value")
     try:
-        return key, tomllib.loads(f"v = {raw}")["v"]
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except RecursionError:
+        raise _nesting_error(f"--set {key}") from None
     except tomllib.TOMLDecodeError:
         pass
+    else:
+        check_nesting(value, f"--set {key}")
+        return key, value
     # bare words fall back to strings; broken structured values are errors
     if raw[0] in "[{\"'":
         raise SceneError(f"--set {key}: cannot parse {_fmt_value(raw)} as a TOML value")
