@@ -48,6 +48,7 @@ __all__ = [
 ]
 
 from . import kinds as _kinds  # noqa: F401  (imports every kind, which registers its schema)
+from ._files import SCENE_FILE_BYTES, read_bounded
 from .schema import (  # noqa: F401  (the schema's public names are this module's too)
     INT32_MAX, INT64_MAX, KINDS, SCENE_TABLE_KEYS, SCHEMAS, VALUE_TYPES, CrossCheck, KeySpec, SceneError, SceneKind,
     _fmt_value, _suggest, check_le, check_value, check_windows, register_kind)
@@ -434,7 +435,9 @@ def load_scene(name_or_path: str | os.PathLike, overrides: Mapping[str, Any] | N
     # a scene file
     path = pathlib.Path(text)
     try:
-        data = path.read_bytes()
+        data = read_bounded(path, SCENE_FILE_BYTES, "a scene file")
+    except ValueError as exc:  # past the bound
+        raise SceneError(f"cannot read scene file {exc}") from None
     except OSError as exc:
         reason = exc.strerror or exc.__class__.__name__
         raise SceneError(f"cannot read scene file {text}: {reason}") from None

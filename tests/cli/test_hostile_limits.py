@@ -70,3 +70,75 @@ def test_deep_nesting_in_a_scene_dict_is_a_scene_error():
 
     with pytest.raises(SceneError, match="the scene nests"):
         Scene.from_dict({"scene": {"kind": "magic8ball"}, "fluid": {"x": _deep_list(DEEP)}})
+
+
+# --- files a user names: each kind read with its own bound ----------------------------------
+
+def _ellipse_dat(path, n: int) -> None:
+    import math
+
+    rows = (f"{math.cos(2 * math.pi * i / n) / 2 + 0.5:.7f} {math.sin(2 * math.pi * i / n) * 0.05:.7f}\n"
+            for i in range(n))
+    path.write_text("ellipse\n" + "".join(rows), encoding="ascii")
+
+
+def _fifo(path) -> None:
+    import os
+
+    os.mkfifo(path)
+
+
+FILES_CLI = [  # (id, make the file at PATH or None for a fixed path, args with PATH in them, words)
+    ("scene-dev-zero", None, ["run", "/dev/zero"], "/dev/zero: more than 1 MiB (a scene file holds at most 1 MiB"),
+    ("scene-2MiB", lambda p: p.write_text('[scene]\nkind = "magic8ball"\n' + "#" * (2 << 20) + "\n"),
+     ["run", "PATH"], "bytes (a scene file holds at most 1 MiB)"),
+    ("scene-fifo-without-writer", _fifo, ["run", "PATH"], "scene.kind is missing"),  # not a hang
+    ("airfoil-dev-zero", None, ["run", "wind-tunnel", "--set", "airfoil.shape=/dev/zero"],
+     "airfoil.shape: /dev/zero: more than 1 MiB (an airfoil file holds at most 1 MiB"),
+    ("airfoil-2MiB", lambda p: p.write_text("t\n" + "0 0\n" * (1 << 19)),
+     ["run", "wind-tunnel", "--set", "airfoil.shape=PATH"], "bytes (an airfoil file holds at most 1 MiB)"),
+]
+
+
+@pytest.mark.parametrize("make, args, words", [c[1:] for c in FILES_CLI], ids=[c[0] for c in FILES_CLI])
+def test_a_named_file_is_read_with_a_bound(tmp_path, make, args, words):
+    path = tmp_path / "named"
+    if make is not None:
+        make(path)
+    args = [str(a).replace("PATH", str(path)) for a in args]
+    proc = run_cli(*args, "--backend", "serial", "--steps", 1, "--out", tmp_path / "o.cps", timeout=30)
+    assert_one_line_error(proc, words.replace("PATH", str(path)))
+
+
+def test_read_dat_is_bounded():
+    from corpuscle import airfoils
+
+    with pytest.raises(ValueError, match=r"^/dev/zero: more than 1 MiB \(an airfoil file holds at most 1 MiB"):
+        airfoils.read_dat("/dev/zero")
+
+
+# --- cheap limits first, naming the key ----------------------------------------------------
+
+def test_airfoil_vertex_limit_comes_before_the_quadratic_check(tmp_path):
+    import time
+
+    dat = tmp_path / "ellipse.dat"
+    _ellipse_dat(dat, 20_000)  # a valid section: its self-intersection test took 11 s
+    t0 = time.perf_counter()
+    proc = run_cli("run", "wind-tunnel", "--set", f"airfoil.shape={dat}", "--backend", "serial", "--steps", 1,
+                   "--out", tmp_path / "o.cps", timeout=60)
+    assert_one_line_error(proc, f"airfoil.shape: {dat}: 20,000 coordinate lines, at most 1024 vertices")
+    assert time.perf_counter() - t0 < 5
+
+
+def test_validate_polygon_vertex_limit_comes_first():
+    import time
+
+    import numpy as np
+    from corpuscle import airfoils
+
+    a = np.linspace(0, 2 * np.pi, 20_000, endpoint=False)
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"^wing: 20,000 vertices, at most 1024$"):
+        airfoils.validate_polygon(np.c_[np.cos(a), np.sin(a)], "wing")
+    assert time.perf_counter() - t0 < 1
