@@ -142,3 +142,72 @@ def test_validate_polygon_vertex_limit_comes_first():
     with pytest.raises(ValueError, match=r"^wing: 20,000 vertices, at most 1024$"):
         airfoils.validate_polygon(np.c_[np.cos(a), np.sin(a)], "wing")
     assert time.perf_counter() - t0 < 1
+
+
+# --- memory: the limits a process really has, not only the host's free memory ----------------
+
+def _run_limited(args, rlimit_as: int, timeout: float = 60):
+    """``corpuscle ARGS`` under ``ulimit -v`` (RLIMIT_AS, bytes)."""
+    import os
+    import resource
+    import subprocess
+
+    from cli_script import script
+
+    env = {k: v for k, v in os.environ.items() if k not in ("CORPUSCLE_DEBUG", "PYTHONWARNINGS")}
+    return subprocess.run([script(), *map(str, args)], env=env, capture_output=True, text=True, timeout=timeout,
+                          preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (rlimit_as, rlimit_as)))
+
+
+MEMORY_CLI = [  # (id, args, RLIMIT_AS, words): 2,000,000 particles need 8.5 GB
+    ("run-ulimit-v", ["run", "magic8ball", "--particles", 2_000_000, "--steps", 1], 2 << 30,
+     "fluid.particles=2000000"),
+    ("bench-ulimit-v", ["bench", "magic8ball", "--particles", 2_000_000, "--steps", 1, "--repeats", 1], 2 << 30,
+     "of memory this process may still use (the process's limit, ulimit -v)"),
+]
+
+
+@pytest.mark.parametrize("args, limit, words", [c[1:] for c in MEMORY_CLI], ids=[c[0] for c in MEMORY_CLI])
+def test_a_run_over_the_process_memory_limit_is_refused(tmp_path, args, limit, words):
+    # it took the host's free memory for its own: 100 s of placement, then std::bad_alloc
+    proc = _run_limited([*args, "--backend", "serial", *(["--out", tmp_path / "o.cps"] if args[0] == "run" else [])],
+                        limit)
+    assert_one_line_error(proc, words)
+
+
+def _write(path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="ascii")
+
+
+CGROUPS = [  # (id, files under a fake root, expected (bytes, words) of process_limit, or None)
+    ("v2", {"proc/self/cgroup": "0::/job/step\n", "sys/fs/cgroup/cgroup.controllers": "memory\n",
+            "sys/fs/cgroup/job/step/memory.max": "max\n", "sys/fs/cgroup/job/step/memory.current": "100\n",
+            "sys/fs/cgroup/job/memory.max": "1000000\n", "sys/fs/cgroup/job/memory.current": "400000\n"},
+     (600000.0, "memory.max")),
+    ("v2-namespace-root", {"proc/self/cgroup": "0::/elsewhere\n", "sys/fs/cgroup/cgroup.controllers": "memory\n",
+                           "sys/fs/cgroup/memory.max": "5000\n", "sys/fs/cgroup/memory.current": "1000\n"},
+     (4000.0, "memory.max")),
+    ("v1", {"proc/self/cgroup": "4:memory:/docker/abc\n1:cpu:/\n",
+            "sys/fs/cgroup/memory/docker/abc/memory.limit_in_bytes": "3000000\n",
+            "sys/fs/cgroup/memory/docker/abc/memory.usage_in_bytes": "1000000\n"},
+     (2000000.0, "memory.limit_in_bytes")),
+    ("v1-unlimited", {"proc/self/cgroup": "4:memory:/\n",
+                      "sys/fs/cgroup/memory/memory.limit_in_bytes": "9223372036854771712\n",
+                      "sys/fs/cgroup/memory/memory.usage_in_bytes": "1000000\n"}, None),
+    ("none", {}, None),
+]
+
+
+@pytest.mark.parametrize("files, expected", [c[1:] for c in CGROUPS], ids=[c[0] for c in CGROUPS])
+def test_cgroup_memory_limits_are_read(tmp_path, monkeypatch, files, expected):
+    from corpuscle import _memory_limits
+
+    monkeypatch.setattr(_memory_limits, "_rlimits", lambda root: [])  # this process's own ulimits aside
+    for rel, text in files.items():
+        _write(tmp_path / rel, text)
+    got = _memory_limits.process_limit(tmp_path)
+    if expected is None:
+        assert got is None
+    else:
+        assert got[0] == expected[0] and expected[1] in got[1]

@@ -395,8 +395,14 @@ def check_memory(kind: str, target: Target, params: dict, keys: str, detail: str
     except ValueError as exc:  # a size the core cannot index (a grid of more than 2^31 cells, ...)
         raise SceneError(f"{keys}: {exc}") from None
     have = float(core().bytes_available(target.backend, target.device))
-    if have > 0 and need > have:
-        where = "GPU memory free" if target.backend == "cuda" else "host memory available"
+    where = "GPU memory free" if target.backend == "cuda" else "host memory available"
+    if target.backend != "cuda":  # a ulimit or a cgroup may allow less than the host has
+        from .._memory_limits import process_limit
+
+        limit = process_limit()
+        if limit is not None and (have <= 0 or limit[0] < have):
+            have, where = limit[0], f"memory this process may still use ({limit[1]})"
+    if (have > 0 or where.startswith("memory this process")) and need > have:
         raise MemoryNeedError(f"{keys} need {fmt_bytes(need)} ({detail}), more than the {fmt_bytes(have)} of {where}")
 
 
