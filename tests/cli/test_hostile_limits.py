@@ -211,3 +211,26 @@ def test_cgroup_memory_limits_are_read(tmp_path, monkeypatch, files, expected):
         assert got is None
     else:
         assert got[0] == expected[0] and expected[1] in got[1]
+
+
+# --- validations: refused before the run, bounded as `run` is ---------------------------------
+
+VALIDATE_CLI = [  # (id, args, words): IndexError after the run, or a run that never ended
+    ("hydrostatic-1-particle", ["hydrostatic", "--particles", 1], "--particles must be at least 32"),
+    ("hydrostatic-4-particles", ["hydrostatic", "--particles", 4], "got 4"),
+    ("hydrostatic-3d-4-particles", ["hydrostatic", "--dim", 3, "--particles", 4], "got 4"),
+    ("hydrostatic-time-1e30", ["hydrostatic", "--time", "1e30"],
+     "--time 1e30: run.end_time must be a number in (0, 1e7] s, got 1e30"),
+    ("hydrostatic-3d-time-1e30", ["hydrostatic", "--dim", 3, "--time", "1e30"], "--time 1e30: run.end_time"),
+]
+
+
+@pytest.mark.parametrize("args, words", [c[1:] for c in VALIDATE_CLI], ids=[c[0] for c in VALIDATE_CLI])
+def test_validate_refuses_at_once(args, words):
+    proc = run_cli("validate", *args, "--backend", "serial", timeout=30)
+    assert_one_line_error(proc, words)
+
+
+def test_validate_hydrostatic_runs_at_its_smallest_size():
+    proc = run_cli("validate", "hydrostatic", "--particles", 32, "--time", 0.01, "--backend", "serial", timeout=60)
+    assert proc.returncode in (0, 1) and "Traceback" not in proc.stderr, proc.stderr
