@@ -138,6 +138,14 @@ def _walk(doc: Mapping[str, Any], prefix: str, kind: SceneKind, tables: set[str]
             raise _unknown_key(dotted, kind)
 
 
+def _check_array_size(name: str, entries: Any, kind: SceneKind) -> None:
+    """At most ``kind.max_in_arrays[name]`` entries (the core's capacity): checked before
+    any entry is validated, walked or copied."""
+    most = kind.max_in_arrays.get(name)
+    if most is not None and isinstance(entries, (list, tuple)) and len(entries) > most:
+        raise SceneError(f"{name}: {len(entries):,} [[{name}]] entries, at most {most}")
+
+
 def _check_array(name: str, entries: Any, kind: SceneKind,
                  base: str | os.PathLike | None = None) -> list[dict[str, Any]]:
     """Validate an array of tables (``[[shake]]``); entries are numbered from 1."""
@@ -145,6 +153,7 @@ def _check_array(name: str, entries: Any, kind: SceneKind,
     required = kind.required_in_arrays.get(name, ())
     if not isinstance(entries, (list, tuple)):
         raise SceneError(f"{name} must be an array of tables ([[{name}]]), got {_fmt_value(entries)}")
+    _check_array_size(name, entries, kind)
     out = []
     for i, entry in enumerate(entries, start=1):
         where = f"{name}[{i}]"
@@ -252,12 +261,14 @@ class Scene:
         builtin: bool = False,
         fallback_name: str = "scene",
     ) -> None:
+        kind, self.name, self.description = _scene_table(doc, fallback_name)
+        for name in kind.arrays:  # the cheap limits first: before anything walks or copies the document
+            _check_array_size(name, doc.get(name), kind)
         check_nesting(doc, "the scene")
         # the raw document is kept so overrides re-validate everything together
         self._doc = copy.deepcopy(dict(doc))
         self.path = path
         self.builtin = builtin
-        kind, self.name, self.description = _scene_table(self._doc, fallback_name)
         self.kind = kind.name
         body = {k: v for k, v in self._doc.items() if k != "scene"}
         base = pathlib.Path(os.fspath(path)).parent if path is not None else None
@@ -325,6 +336,8 @@ class Scene:
         doc = copy.deepcopy(self._doc)
         for key, value in overrides.items():
             key = str(key).strip()
+            if key in kind.arrays:
+                _check_array_size(key, value, kind)
             check_nesting(value, key)
             # the [scene] table: name and description only
             if key.startswith("scene.") or key == "scene":

@@ -234,3 +234,73 @@ def test_validate_refuses_at_once(args, words):
 def test_validate_hydrostatic_runs_at_its_smallest_size():
     proc = run_cli("validate", "hydrostatic", "--particles", 32, "--time", 0.01, "--backend", "serial", timeout=60)
     assert proc.returncode in (0, 1) and "Traceback" not in proc.stderr, proc.stderr
+
+
+# --- the Python API: sizes checked before anything of that size is made ----------------------
+
+BATCH_SIZES = [  # (id, from_scene keywords, error, words): a NumPy MemoryError, or 767 s of work
+    ("n-2**31", {"n": 2**31}, ValueError, r"^n = 2147483648 scenes of fluid.particles = 3500: .* particle slots, at most"),
+    ("n-1e7-of-2e6", {"n": 10**7, "particles": 2_000_000}, ValueError,
+     r"^n = 10000000 scenes of fluid.particles = 2000000: 20,000,000,000,000 particle slots"),
+    ("per-scene-counts", {"n": 2, "particles": [300, 2**31]}, ValueError, r"fluid.particles = 2147483648"),
+    ("memory-lower-bound", {"n": 200_000, "particles": 10_000}, ValueError,
+     r"^n = 200000, fluid.particles = 10000 need more than 512 GB"),
+    ("shake-1e6", {"n": 2, "shake": [{"start": 0.0, "end": 1.0}] * 10**6}, ValueError,
+     r"^shake: 1,000,000 \[\[shake\]\] entries, at most 32$"),
+]
+
+
+@pytest.mark.parametrize("kw, error, words", [c[1:] for c in BATCH_SIZES], ids=[c[0] for c in BATCH_SIZES])
+def test_batch_sizes_are_checked_first(kw, error, words):
+    import time
+
+    import corpuscle
+
+    t0 = time.perf_counter()
+    with pytest.raises(error, match=words):
+        corpuscle.Batch.from_scene("magic8ball", backend="serial", settle=0.0, **kw)
+    assert time.perf_counter() - t0 < 2
+
+
+SHAKES = [  # (id, how the windows are given, words): the core refused 33 after placement, naming fluid.particles
+    ("api-33", "api", 33, r"^shake: 33 \[\[shake\]\] entries, at most 32$"),
+    ("api-1e6", "api", 10**6, r"^shake: 1,000,000 \[\[shake\]\] entries, at most 32$"),
+    ("file-60000", "file", 60_000, "shake: 60,000 [[shake]] entries, at most 32"),
+]
+
+
+@pytest.mark.parametrize("how, count, words", [c[1:] for c in SHAKES], ids=[c[0] for c in SHAKES])
+def test_shake_windows_are_counted_first(tmp_path, how, count, words):
+    import time
+
+    t0 = time.perf_counter()
+    if how == "api":
+        import corpuscle
+        from corpuscle.scene import SceneError
+
+        with pytest.raises(SceneError, match=words):
+            corpuscle.Simulation.from_scene("magic8ball", backend="serial",
+                                            overrides={"shake": [{"start": 0.0, "end": 1.0}] * count})
+        assert time.perf_counter() - t0 < 2
+    else:
+        scene = tmp_path / "shakes.toml"
+        scene.write_text("shake = [" + ",".join(["{start=0,end=1}"] * count) + ']\n[scene]\nkind = "magic8ball"\n')
+        proc = run_cli("run", scene, "--backend", "serial", "--steps", 1, "--out", tmp_path / "o.cps")
+        assert_one_line_error(proc, words)
+
+
+@pytest.mark.parametrize("env", ["vector", "single"])
+@pytest.mark.parametrize("call", ["step", "reset"])
+def test_a_closed_env_says_it_is_closed(env, call):
+    pytest.importorskip("gymnasium")
+    import numpy as np
+    from corpuscle.envs import Magic8BallEnv, Magic8BallVectorEnv
+
+    if env == "vector":
+        e, action = Magic8BallVectorEnv(num_envs=2, backend="serial", particles=200, settle=0.0), np.zeros((2, 6))
+    else:
+        e, action = Magic8BallEnv(backend="serial", particles=200, settle=0.0), np.zeros(6)
+    e.reset(seed=1)
+    e.close()
+    with pytest.raises(RuntimeError, match=r"^the environment is closed"):  # was AttributeError on None
+        e.step(action) if call == "step" else e.reset()

@@ -361,5 +361,6 @@ def column_height(pos: np.ndarray, dp: float) -> float:
 def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int, checks=()) -> SceneKind:
     return SceneKind(name=name, description=description, keys=keys, arrays={"probes": probe_keys(dim)},
                      required_in_arrays={"probes": ("name", "position")},
+                     max_in_arrays={"probes": 64},  # kMaxProbes of scenes/sph/model.h
                      checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_lanes, *checks])
 
