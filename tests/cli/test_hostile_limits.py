@@ -304,3 +304,37 @@ def test_a_closed_env_says_it_is_closed(env, call):
     e.close()
     with pytest.raises(RuntimeError, match=r"^the environment is closed"):  # was AttributeError on None
         e.step(action) if call == "step" else e.reset()
+
+
+# --- the live viewer: a request it cannot parse is one line, never a traceback ---------------
+
+BAD_REQUESTS = [  # (id, raw request): aiohttp printed a 15-line traceback for each
+    ("oversized-header-value", b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Big: " + b"a" * 20000 + b"\r\n\r\n"),
+    ("oversized-header-name", b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n" + b"X" * 20000 + b": 1\r\n\r\n"),
+    ("oversized-url", b"GET /" + b"b" * 20000 + b" HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"),
+]
+
+
+@pytest.mark.parametrize("raw", [c[1] for c in BAD_REQUESTS], ids=[c[0] for c in BAD_REQUESTS])
+def test_viewer_bad_request_is_at_most_one_line(capfd, caplog, raw):
+    pytest.importorskip("aiohttp")
+    import socket
+    import time
+
+    from corpuscle.live import LiveServer
+
+    lines: list[str] = []
+    s = LiveServer({"scene": "t", "kind": "test", "dim": 3,
+                    "container": {"type": "sphere", "center": [0, 0, 0], "radius": 1.0}}, port=0, log=lines.append)
+    s.start()
+    try:
+        with socket.create_connection(("127.0.0.1", s.port), timeout=10) as c:
+            c.sendall(raw)
+            assert c.recv(64).startswith(b"HTTP/1.") or True  # the client's 400 (or a closed socket)
+        time.sleep(0.3)
+    finally:
+        s.stop()
+    out, err = capfd.readouterr()
+    assert not [r for r in caplog.records if r.exc_info], caplog.text  # logged tracebacks reach stderr
+    assert "Traceback" not in err + out and err.count("\n") <= 1, err
+    assert len(lines) <= 1 and all("\n" not in line and len(line) < 300 for line in lines), lines
