@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._files import AIRFOIL_FILE_BYTES, read_bounded
+
 __all__ = [
     "read_dat",
     "naca4",
@@ -37,7 +39,12 @@ __all__ = [
     "signed_area",
     "validate_polygon",
     "shipped",
+    "MAX_VERTICES",
 ]
+
+#: the most vertices a section may have (the core's contact test walks every edge); checked
+#: before anything costs more than reading the file (the self-intersection test is O(n^2))
+MAX_VERTICES = 1024
 
 # the NACA 4-digit thickness coefficients (Abbott & von Doenhoff, "Theory of Wing Sections",
 # 1959, sec. 6.4; Jacobs, Ward & Pinkerton, NACA Report 460, 1933):
@@ -102,6 +109,8 @@ def validate_polygon(polygon, name: str = "polygon") -> np.ndarray:
         raise ValueError(f"{name}: expected an array of shape (N, 2), got shape {p.shape}")
     if len(p) < 3:
         raise ValueError(f"{name}: a polygon needs at least 3 vertices, got {len(p)}")
+    if len(p) > MAX_VERTICES:
+        raise ValueError(f"{name}: {len(p):,} vertices, at most {MAX_VERTICES}")
     if not np.all(np.isfinite(p)):
         raise ValueError(f"{name}: vertex {int(np.argmin(np.all(np.isfinite(p), axis=1)))} is not finite")
     if np.array_equal(p[0], p[-1]):
@@ -186,7 +195,7 @@ def read_dat(path, normalize_chord: bool = True) -> np.ndarray:
     path = Path(path)
     where = str(path)
     try:
-        raw = path.read_bytes()
+        raw = read_bounded(path, AIRFOIL_FILE_BYTES, "an airfoil file")
     except OSError as e:
         raise ValueError(f"{where}: cannot read the airfoil file ({e.strerror or e})") from None
     if b"\0" in raw:  # text has no NUL bytes: an image, an archive, random bytes
@@ -206,6 +215,8 @@ def read_dat(path, normalize_chord: bool = True) -> np.ndarray:
         body = rows[1:]
     if not body:
         raise ValueError(f"{where}:{rows[-1][0]}: no coordinates after the title")
+    if len(body) > MAX_VERTICES + 2:  # a Lednicer count line and a repeated closing vertex at most
+        raise ValueError(f"{where}: {len(body):,} coordinate lines, at most {MAX_VERTICES} vertices")
 
     points: list[tuple[float, float]] = []
     lines: list[int] = []

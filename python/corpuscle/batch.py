@@ -31,6 +31,11 @@ from .simulation import _core, resolve_backend
 __all__ = ["Batch", "PER_SCENE_KEYS", "CONTROL_COLUMNS", "cube_rotations"]
 
 #: scene keys that may be given as one value per scene (an array of length n)
+#: particle slots of a batch (scenes x the most particles of one): the core indexes them with int32
+MAX_SLOTS = 2**31 - 1
+#: a lower bound of the memory one particle slot needs (positions, velocities, densities,
+#: neighbour slots...: about 4 kB at the default scene): checked before anything is built
+MIN_SLOT_BYTES = 256
 PER_SCENE_KEYS = ("fluid.particles", "fluid.stiffness", "fluid.viscosity", "die.side", "die.density", "run.seed")
 #: the columns of a batch's actions: container linear acceleration (m/s²), shell torque (N·m)
 CONTROL_COLUMNS = ("acceleration_x", "acceleration_y", "acceleration_z", "torque_x", "torque_y", "torque_z")
@@ -152,6 +157,19 @@ class Batch:
         shared, per = _split_overrides(n, ovr)
         base = scene.with_overrides(shared) if shared else scene
         v = base.values
+        # the cheap limits first: nothing of size n is made before they hold
+        n_most = int(np.max(per["fluid.particles"])) if "fluid.particles" in per else int(v["fluid.particles"])
+        if n * n_most > MAX_SLOTS:
+            raise ValueError(f"n = {n} scenes of fluid.particles = {n_most}: {n * n_most:,} particle slots, "
+                             f"at most {MAX_SLOTS:,}")
+        self.backend = resolve_backend(backend)
+        self.device = _count("device", device)
+        have, where = _kinds.memory_available(Target(self.backend, "lists", self.device))
+        if have is not None and n * n_most * MIN_SLOT_BYTES > have:
+            raise _kinds.MemoryNeedError(
+                f"n = {n}, fluid.particles = {n_most} need more than {_kinds.fmt_bytes(n * n_most * MIN_SLOT_BYTES)} "
+                f"({n * n_most:,} particle slots of at least {MIN_SLOT_BYTES} bytes), more than the "
+                f"{_kinds.fmt_bytes(have)} of {where}")
         seeds = per.pop("run.seed", None)
         if seeds is None:
             seeds = int(v["run.seed"]) + np.arange(n, dtype=np.int64)
@@ -168,13 +186,11 @@ class Batch:
             key = tuple(cols[k][s].item() for k in cols)
             if key not in combos:
                 combos[key] = base.with_overrides(dict(zip(cols, key)))
-        self.backend = resolve_backend(backend)
         kinds = dict(_core().kinds())
         self.neighbors = kinds["magic8ball"][0] if neighbors is None else str(neighbors)
         if self.neighbors not in kinds["magic8ball"]:
             raise ValueError(f"--neighbors must be one of {', '.join(kinds['magic8ball'])} (the indexes of magic8ball), "
                              f"got {self.neighbors!r}")
-        self.device = _count("device", device)
         if self.device and self.backend != "cuda":
             raise ValueError(f"--device {self.device}: selects a CUDA device; the {self.backend} backend has none "
                              "(leave --device out, or use --backend cuda)")

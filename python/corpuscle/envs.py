@@ -112,9 +112,10 @@ class Magic8BallVectorEnv(VectorEnv):
     # the Gymnasium API ----------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Every scene (or those of ``options["reset_mask"]``) back to the settled start."""
+        batch = self._open_batch()
         super().reset(seed=seed)  # self.np_random from the seed
         if seed is not None:
-            self.batch._rng = np.random.default_rng(seed)
+            batch._rng = np.random.default_rng(seed)
         mask = None if options is None else options.get("reset_mask")
         if mask is not None:
             mask = np.asarray(mask)
@@ -127,7 +128,7 @@ class Magic8BallVectorEnv(VectorEnv):
         return self._observe(), {}
 
     def step(self, actions):
-        a = self.batch._actions(actions)
+        a = self._open_batch()._actions(actions)
         lo, hi = self.single_action_space.low, self.single_action_space.high
         a = np.clip(a, lo, hi) * self.action_scale
         # scenes whose episode ended last step restart now and hold still this step
@@ -151,6 +152,12 @@ class Magic8BallVectorEnv(VectorEnv):
     def close_extras(self, **kwargs):
         self.batch = None
 
+    def _open_batch(self):
+        """The batch, or a one-line RuntimeError once the environment is closed."""
+        if self.batch is None:
+            raise RuntimeError("the environment is closed (make a new one to step or reset)")
+        return self.batch
+
     # observations ---------------------------------------------------------------------
     def _observe(self, raw: bool = False):
         o = self.batch.observations(like="numpy")
@@ -172,12 +179,17 @@ class Magic8BallEnv(gym.Env):
         self.action_space = self.vec.single_action_space
         self.observation_space = self.vec.single_observation_space
 
+    def close(self):
+        self.vec.close()
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self.vec._open_batch()
         super().reset(seed=seed)
         obs, info = self.vec.reset(seed=seed)
         return obs[0], info
 
     def step(self, action):
+        self.vec._open_batch()
         a = np.asarray(action, dtype=np.float32)
         if a.shape != (6,):
             raise ValueError(f"action must be 6 numbers, got shape {a.shape}")

@@ -48,6 +48,7 @@ __all__ = [
 ]
 
 from . import kinds as _kinds  # noqa: F401  (imports every kind, which registers its schema)
+from ._files import SCENE_FILE_BYTES, read_bounded
 from .schema import (  # noqa: F401  (the schema's public names are this module's too)
     INT32_MAX, INT64_MAX, KINDS, SCENE_TABLE_KEYS, SCHEMAS, VALUE_TYPES, CrossCheck, KeySpec, SceneError, SceneKind,
     _fmt_value, _suggest, check_le, check_value, check_windows, register_kind)
@@ -56,6 +57,32 @@ from .schema import (  # noqa: F401  (the schema's public names are this module'
 # ---------------------------------------------------------------------------
 # validation of a whole document
 # ---------------------------------------------------------------------------
+
+#: arrays and tables nest at most this deep in a scene (the deepest key of a kind is a few
+#: levels: a [[shake]] entry's vector is 3); deeper is refused before anything walks it
+MAX_NESTING = 32
+
+
+def _nesting_error(where: str) -> SceneError:
+    return SceneError(f"{where} nests arrays or tables more than {MAX_NESTING} levels deep")
+
+
+def check_nesting(value: Any, where: str) -> None:
+    """Refuse ``value`` nested more than :data:`MAX_NESTING` levels of arrays or tables
+    (walked without recursion, so any depth gives this one-line SceneError, never a
+    RecursionError from a later copy, walk or repr)."""
+    stack = [(value, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, Mapping):
+            children = node.values()
+        elif isinstance(node, (list, tuple)):
+            children = node
+        else:
+            continue
+        if depth >= MAX_NESTING:
+            raise _nesting_error(where)
+        stack.extend((c, depth + 1) for c in children)
 
 
 def _tables_of(keys: Iterable[str]) -> set[str]:
@@ -111,6 +138,14 @@ def _walk(doc: Mapping[str, Any], prefix: str, kind: SceneKind, tables: set[str]
             raise _unknown_key(dotted, kind)
 
 
+def _check_array_size(name: str, entries: Any, kind: SceneKind) -> None:
+    """At most ``kind.max_in_arrays[name]`` entries (the core's capacity): checked before
+    any entry is validated, walked or copied."""
+    most = kind.max_in_arrays.get(name)
+    if most is not None and isinstance(entries, (list, tuple)) and len(entries) > most:
+        raise SceneError(f"{name}: {len(entries):,} [[{name}]] entries, at most {most}")
+
+
 def _check_array(name: str, entries: Any, kind: SceneKind,
                  base: str | os.PathLike | None = None) -> list[dict[str, Any]]:
     """Validate an array of tables (``[[shake]]``); entries are numbered from 1."""
@@ -118,6 +153,7 @@ def _check_array(name: str, entries: Any, kind: SceneKind,
     required = kind.required_in_arrays.get(name, ())
     if not isinstance(entries, (list, tuple)):
         raise SceneError(f"{name} must be an array of tables ([[{name}]]), got {_fmt_value(entries)}")
+    _check_array_size(name, entries, kind)
     out = []
     for i, entry in enumerate(entries, start=1):
         where = f"{name}[{i}]"
@@ -225,11 +261,14 @@ class Scene:
         builtin: bool = False,
         fallback_name: str = "scene",
     ) -> None:
+        kind, self.name, self.description = _scene_table(doc, fallback_name)
+        for name in kind.arrays:  # the cheap limits first: before anything walks or copies the document
+            _check_array_size(name, doc.get(name), kind)
+        check_nesting(doc, "the scene")
         # the raw document is kept so overrides re-validate everything together
         self._doc = copy.deepcopy(dict(doc))
         self.path = path
         self.builtin = builtin
-        kind, self.name, self.description = _scene_table(self._doc, fallback_name)
         self.kind = kind.name
         body = {k: v for k, v in self._doc.items() if k != "scene"}
         base = pathlib.Path(os.fspath(path)).parent if path is not None else None
@@ -297,6 +336,9 @@ class Scene:
         doc = copy.deepcopy(self._doc)
         for key, value in overrides.items():
             key = str(key).strip()
+            if key in kind.arrays:
+                _check_array_size(key, value, kind)
+            check_nesting(value, key)
             # the [scene] table: name and description only
             if key.startswith("scene.") or key == "scene":
                 leaf = key[len("scene."):] if key.startswith("scene.") else ""
@@ -356,11 +398,16 @@ def _builtin_names() -> list[str]:
 def _parse_toml_bytes(data: bytes, label: str) -> dict[str, Any]:
     """Parse TOML, turning decode and syntax errors into one-line SceneErrors."""
     try:
-        return tomllib.loads(data.decode("utf-8"))
+        doc = tomllib.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise SceneError(f"cannot read scene file {label}: it nests arrays or tables more than {MAX_NESTING} "
+                         f"levels deep") from None
     except UnicodeDecodeError as exc:
         raise SceneError(f"cannot read scene file {label}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"cannot read scene file {label}: {exc}") from None
+    check_nesting(doc, f"scene file {label}")
+    return doc
 
 
 def builtin_scenes() -> list[tuple[str, str]]:
@@ -401,7 +448,9 @@ def load_scene(name_or_path: str | os.PathLike, overrides: Mapping[str, Any] | N
     # a scene file
     path = pathlib.Path(text)
     try:
-        data = path.read_bytes()
+        data = read_bounded(path, SCENE_FILE_BYTES, "a scene file")
+    except ValueError as exc:  # past the bound
+        raise SceneError(f"cannot read scene file {exc}") from None
     except OSError as exc:
         reason = exc.strerror or exc.__class__.__name__
         raise SceneError(f"cannot read scene file {text}: {reason}") from None
@@ -436,9 +485,14 @@ def parse_set(expr: str) -> tuple[str, object]:
     if not raw:
         raise SceneError(f"--set {key}= has no value")
     try:
-        return key, tomllib.loads(f"v = {raw}")["v"]
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except RecursionError:
+        raise _nesting_error(f"--set {key}") from None
     except tomllib.TOMLDecodeError:
         pass
+    else:
+        check_nesting(value, f"--set {key}")
+        return key, value
     # bare words fall back to strings; broken structured values are errors
     if raw[0] in "[{\"'":
         raise SceneError(f"--set {key}: cannot parse {_fmt_value(raw)} as a TOML value")

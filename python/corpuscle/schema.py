@@ -150,6 +150,8 @@ class SceneKind:
     arrays: dict[str, dict[str, KeySpec]] = field(default_factory=dict)
     checks: list[CrossCheck] = field(default_factory=list)
     required_in_arrays: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    #: the most entries of each array of tables (the core's capacity), checked before any entry
+    max_in_arrays: dict[str, int] = field(default_factory=dict)
 
 
 # kind name -> dotted key -> spec (the public view of KINDS); filled by corpuscle.kinds

@@ -125,7 +125,8 @@ from .._errors import MemoryNeedError
 from ..schema import SceneError, SceneKind
 
 __all__ = ["Kind", "Build", "Target", "register", "find", "get", "registry", "count", "finite_vector",
-           "CONTROL_BOUNDS", "bounded_control", "particle_array", "fmt_bytes", "check_memory", "key_values", "kind_method", "core"]
+           "CONTROL_BOUNDS", "bounded_control", "particle_array", "fmt_bytes", "check_memory", "memory_available",
+           "key_values", "kind_method", "core"]
 
 # the run keys every kind declares (the CLI's --time and --every set them)
 REQUIRED_KEYS = ("run.end_time", "run.record_every")
@@ -402,6 +403,22 @@ def key_values(scene, keys) -> str:
     return ", ".join(f"{k}={v[k]!r}".replace("True", "true").replace("False", "false") for k in keys)
 
 
+def memory_available(target: Target) -> tuple[float | None, str]:
+    """(bytes the backend can allocate now, what they are), None where unknown: the GPU's free
+    memory, or the host's available memory within the process's own limits (a ulimit, a
+    cgroup: :mod:`corpuscle._memory_limits`)."""
+    have = float(core().bytes_available(target.backend, target.device))
+    where = "GPU memory free" if target.backend == "cuda" else "host memory available"
+    if target.backend != "cuda":  # a ulimit or a cgroup may allow less than the host has
+        from .._memory_limits import process_limit
+
+        limit = process_limit()
+        if limit is not None and (have <= 0 or limit[0] < have):
+            have, where = limit[0], f"memory this process may still use ({limit[1]})"
+            return have, where
+    return (have if have > 0 else None), where
+
+
 def check_memory(kind: str, target: Target, params: dict, keys: str, detail: str) -> None:
     """Fail (:class:`MemoryNeedError`, naming ``keys`` and ``detail``) before allocating
     when a simulation with these parameters needs more memory than the backend has."""
@@ -409,9 +426,8 @@ def check_memory(kind: str, target: Target, params: dict, keys: str, detail: str
         need = float(core().bytes_needed(kind, target.index, params))
     except ValueError as exc:  # a size the core cannot index (a grid of more than 2^31 cells, ...)
         raise SceneError(f"{keys}: {exc}") from None
-    have = float(core().bytes_available(target.backend, target.device))
-    if have > 0 and need > have:
-        where = "GPU memory free" if target.backend == "cuda" else "host memory available"
+    have, where = memory_available(target)
+    if have is not None and need > have:
         raise MemoryNeedError(f"{keys} need {fmt_bytes(need)} ({detail}), more than the {fmt_bytes(have)} of {where}")
 
 

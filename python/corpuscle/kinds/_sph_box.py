@@ -403,6 +403,7 @@ def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int,
     """The kind's schema; ``box(values)`` is the tank's inner size (what probes must lie in)."""
     return SceneKind(name=name, description=description, keys=keys, arrays={"probes": probe_keys(dim)},
                      required_in_arrays={"probes": ("name", "position")},
+                     max_in_arrays={"probes": 64},  # kMaxProbes of scenes/sph/model.h
                      checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_lanes, *checks,
                              _probes_inside(box)])
 

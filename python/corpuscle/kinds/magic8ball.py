@@ -146,6 +146,7 @@ SCHEMA = SceneKind(
     keys=MAGIC8BALL_KEYS,
     arrays={"shake": SHAKE_KEYS},
     required_in_arrays={"shake": ("start", "end")},
+    max_in_arrays={"shake": 32},  # kMaxShakes of scenes/magic8ball/model.h
     checks=[check_le("timestep.dt_min", "timestep.dt_max"), check_windows("shake"), _die_inside_container,
             _lanes_width],
 )

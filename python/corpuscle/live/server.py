@@ -13,6 +13,8 @@ import asyncio
 import hmac
 import importlib.resources
 import ipaddress
+import logging
+import re
 import sys
 import threading
 import time
@@ -68,6 +70,25 @@ class _Client:
         # CREDITS frames it has not drawn yet (None: a client that never says it; the
         # socket's own back-pressure only)
         self.credits: int | None = None
+
+
+class _OneLineLogger(logging.Logger):
+    """aiohttp's server logger for one LiveServer: each record (a bad request, a client that
+    went away mid-request) as one rate-limited line of the server's log, never a traceback."""
+
+    def __init__(self, server: "LiveServer"):
+        super().__init__("corpuscle.live.http", logging.WARNING)
+        self.propagate = False
+        self._server = server
+
+    def handle(self, record: logging.LogRecord) -> None:
+        text = record.getMessage()
+        exc = record.exc_info[1] if record.exc_info else None
+        if exc is not None:
+            why = " ".join(str(getattr(exc, "message", "") or exc).split())
+            why = re.sub(r"^\d{3}, message: ", "", why)
+            text = f"{text}: {type(exc).__name__}: {why[:80]}{'...' if len(why) > 80 else ''}"
+        self._server._log_limited(" ".join(text.split()))
 
 
 class LiveServer:
@@ -222,7 +243,9 @@ class LiveServer:
         app.router.add_get("/ws", self._websocket)
         app.router.add_get("/static/{name}", self._static)
         app.router.add_get("/favicon.ico", self._no_content)
-        self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        # aiohttp logs a request it cannot parse (an oversized header or URL, bytes that are
+        # not HTTP) with its traceback; the client already has its 400: one line here
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, logger=_OneLineLogger(self))
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port, reuse_address=False)
         try:
@@ -251,6 +274,10 @@ class LiveServer:
 
     def _reject(self, peer: str, reason: str) -> None:
         self.rejected += 1
+        self._log_limited(f"rejected message from {peer}: {reason}")
+
+    def _log_limited(self, line: str) -> None:
+        """One line through ``self.log``; past 20 a second they are counted, not echoed."""
         now = time.monotonic()
         self._log_times = [t for t in self._log_times if now - t < 1.0]
         if len(self._log_times) >= 20:  # a flood is summarised, not echoed line by line
@@ -259,7 +286,7 @@ class LiveServer:
         self._log_times.append(now)
         more = f" ({self._log_suppressed} more suppressed)" if self._log_suppressed else ""
         self._log_suppressed = 0
-        self.log(f"rejected message from {peer}: {reason}{more}")
+        self.log(f"{line}{more}")
 
     def _authorised(self, request) -> bool:
         if self.token is None:

@@ -26,6 +26,9 @@ from ._common import add_engine, positive_int
 
 WIDTH, HEIGHT = 0.2, 0.4
 SETTLE = 1.0
+#: the pressure profile needs layers of at least 3 particles below the top two: fewer
+#: particles give none to compare (checked before the run)
+MIN_PARTICLES = 32
 
 
 def add_arguments(parser) -> None:
@@ -37,11 +40,14 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> list[Check]:
-    from ..scene import load_scene
+    from ..scene import SceneError, load_scene
     from ..simulation import Simulation
 
     dim = int(args.dim)
     n = positive_int("--particles", args.particles) or (800 if dim == 2 else 2000)
+    if n < MIN_PARTICLES:
+        raise ValueError(f"--particles must be at least {MIN_PARTICLES} (the pressure profile needs layers of "
+                         f"3 particles or more), got {n}")
     if args.full:
         n *= 4
     try:
@@ -51,10 +57,15 @@ def run(args) -> list[Check]:
     if not (math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"--time must be a positive number of seconds, got {args.time!r}")
     over = {"fluid.particles": n, "dam.a": WIDTH, "dam.height": HEIGHT / WIDTH, "dam.tank_length": 1.0,
-            "dam.tank_height": 1.25 * HEIGHT / WIDTH, "probes": []}
+            "dam.tank_height": 1.25 * HEIGHT / WIDTH, "probes": [], "run.end_time": t_end}
     if dim == 3:
         over["dam.depth"] = 1.0
-    scene = load_scene("dam-break-2d" if dim == 2 else "dam-break").with_overrides(over)
+    try:  # --time is run.end_time, bounded as `run --time` is
+        scene = load_scene("dam-break-2d" if dim == 2 else "dam-break").with_overrides(over)
+    except SceneError as exc:
+        if str(exc).startswith("run.end_time "):
+            raise SceneError(f"--time {args.time}: {exc}") from None
+        raise
     sim = Simulation(scene, args.backend, neighbors=args.neighbors, device=args.device)
     info = sim.info
     dp, rho0, g, m = info["spacing"], info["rho0"], info["gravity"], info["mass"]
@@ -81,6 +92,9 @@ def run(args) -> list[Check]:
             continue
         d = float(depth[sel].mean())
         rows.append((d, float(prs[sel].mean()), rho0 * g * d))
+    if not rows:
+        raise ValueError(f"--particles {n}: no layer of 3 particles or more below the top two to measure; "
+                         f"give more particles")
     rows_a = np.array(rows)
     rel = np.abs(rows_a[:, 1] - rows_a[:, 2]) / rows_a[:, 2]
     worst = int(np.argmax(rel))
