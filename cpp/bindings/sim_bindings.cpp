@@ -516,11 +516,25 @@ void bind_sim(nb::module_& m) {
              s.sim->unpack(slot, rec.c_str());
            }, nb::arg("slot"), nb::arg("record"), "Write a record (as pack() returns it) into slot `slot`.")
       .def("bench", [](PySim& s, long long n) {
-             nb::gil_scoped_release r;
-             return s.sim->bench(n);
-           }, nb::arg("steps"), "Seconds for `steps` steps (CUDA events / monotonic clock after a synchronise).")
+             SignalCheck check;
+             double seconds = 0.0;
+             {
+               nb::gil_scoped_release r;
+               seconds = s.sim->bench(n, [&check] { return check(); });
+             }
+             if (check.raised) throw nb::python_error();
+             return seconds;
+           }, nb::arg("steps"),
+           "Seconds for `steps` steps (CUDA events / monotonic clock after a synchronise). A Python "
+           "signal (Ctrl-C) stops it after a whole step and is raised.")
       .def("profile", [](PySim& s, long long n) {
-             nb::gil_scoped_release r;
-             return s.sim->profile(n);
-           }, nb::arg("steps"), "Per-stage milliseconds per step over `steps` steps.");
+             SignalCheck check;
+             std::vector<std::pair<std::string, double>> out;
+             {
+               nb::gil_scoped_release r;
+               out = s.sim->profile(n, [&check] { return check(); });
+             }
+             if (check.raised) throw nb::python_error();
+             return out;
+           }, nb::arg("steps"), "Per-stage milliseconds per step over `steps` steps (Ctrl-C: as bench).");
 }

@@ -103,8 +103,10 @@ class Sim {
   virtual void copy_to_host(void* dst, const void* src, size_t bytes) = 0;
 
   // seconds for n steps on the backend's clock after a synchronise; per-stage ms per step
-  virtual double bench(long long n) = 0;
-  virtual std::vector<std::pair<std::string, double>> profile(long long n) = 0;
+  // (stop: as step's, asked between batches of steps; a stopped measurement is meaningless and
+  // the caller discards it)
+  virtual double bench(long long n, const StopCheck& stop = {}) = 0;
+  virtual std::vector<std::pair<std::string, double>> profile(long long n, const StopCheck& stop = {}) = 0;
 };
 
 }  // namespace cps

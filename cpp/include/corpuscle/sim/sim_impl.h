@@ -348,18 +348,19 @@ class SimImpl final : public Sim {
     ex_.to_host(dst, src, bytes);
   }
 
-  double bench(long long n) override {
+  double bench(long long n, const StopCheck& stop) override {
     step(1, {});  // capture / warm the step outside the timing
     ex_.synchronize();
-    double s = ex_.time([&] { step(n, {}); });
+    double s = ex_.time([&] { step(n, stop); });
     return s;
   }
 
-  std::vector<std::pair<std::string, double>> profile(long long n) override {
+  std::vector<std::pair<std::string, double>> profile(long long n, const StopCheck& stop) override {
     flush_control();
     ex_.synchronize();
     ex_.profile_begin();
     for (long long k = 0; k < n; ++k) {
+      if (stop && stop()) break;
       p_.prepare();
       p_.enqueue(true);
       p_.advance(true);
