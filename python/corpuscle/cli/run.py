@@ -18,8 +18,9 @@ from .. import _json
 from .. import kinds as _kinds
 from .._errors import DISK_FULL_ERRNOS as _DISK_FULL, EXIT_WRITE  # a full disk or a file size limit: exit 4
 from .._frame_sink import FrameSink
-from ._common import command_line, interruptible_init, now_iso, relistings
-from ._options import (BACKENDS, EXIT_INTERRUPTED, EXIT_OK, EXIT_STOPPED, PROG, Command, UsageError,
+from ._common import (STOP_SIGNALS, command_line, interrupt_exit_code, interruptible_init, now_iso, relistings,
+                      signal_name)
+from ._options import (BACKENDS, EXIT_OK, EXIT_STOPPED, PROG, Command, UsageError,
                        add_engine_options, add_live_arguments, err, fmt_rate, import_core_module, live_url_message,
                        one_line, particles_help, progress_enabled, register)
 from ._run_plan import RunPlan, checkpoint_state, prepare, same_file
@@ -133,17 +134,28 @@ def _live_render(args: argparse.Namespace, header: dict[str, Any]):
 
 @contextlib.contextmanager
 def _interrupts_deferred():
-    """Ctrl-C while a frame is written takes effect once it is whole."""
+    """Ctrl-C (SIGTERM, SIGHUP) while a frame is queued takes effect once it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     hits: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, _frame: hits.append(signum))
+    previous = {}
+    for signum in STOP_SIGNALS:
+        handler = signal.getsignal(signum)
+        if handler in (signal.SIG_IGN, signal.SIG_DFL, None):
+            continue  # ignored (nohup) or not ours: left alone
+        previous[signum] = signal.signal(signum, lambda signum, _frame: hits.append(signum))
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
         if hits:
+            if hits[0] == signal.SIGINT:
+                raise KeyboardInterrupt
+            handler = previous.get(hits[0])
+            if callable(handler):
+                handler(hits[0], None)  # raises as the signal would have
             raise KeyboardInterrupt
 
 
@@ -257,7 +269,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     frames = 0
     last_recorded = start_steps
     stopped: str | None = None
-    interrupted = False
+    interrupted: KeyboardInterrupt | None = None
     write_error: str | None = None
     budget = None if plan.end_step is None else plan.end_step - start_steps
     progress = _Progress(progress_enabled(args), budget, plan.end_time)
@@ -312,8 +324,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     last_recorded = now
                     if viewer is not None:
                         viewer.stepped(sim, recorded=True)
-            except KeyboardInterrupt:
-                interrupted = True
+            except KeyboardInterrupt as exc:
+                interrupted = exc
                 if int(sim.steps) > last_recorded:
                     try:
                         _record(sink, sim, args, live)  # the whole step it stopped after
@@ -346,9 +358,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     # the writer is closed here, so every recorded frame is readable
 
     steps = int(sim.steps) - start_steps
-    if interrupted:
-        err(f"run interrupted at step {sim.steps}; {frames} frames kept in {out}")
-        return EXIT_INTERRUPTED
+    if interrupted is not None:
+        by = signal_name(interrupted)
+        err(f"run interrupted at step {sim.steps}; {frames} frames kept in {out}" + (f" ({by})" if by else ""))
+        return interrupt_exit_code(interrupted)
     result = None if stopped or write_error else dict(sim.result() or {})
     n = int(sim.n_particles)
     ghosts = getattr(sim, "n_ghosts", None)
