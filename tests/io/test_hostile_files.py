@@ -18,6 +18,7 @@ import subprocess
 import sys
 import textwrap
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ import pytest
 
 import corpuscle
 from corpuscle.io import FrameStreamError, FrameWriter
-from cli_script import assert_one_line_error, corpuscle as run_cli, script
+from cli_script import assert_one_line_error, corpuscle as run_cli, listing, script
 
 needs_core = pytest.mark.skipif(not any(Path(corpuscle.__file__).parent.glob("_core*")),
                                 reason="needs the compiled core")
@@ -92,3 +93,135 @@ def test_a_stop_signal_stops_any_command_with_one_line(argv):
     assert proc.returncode == 143, stderr
     assert "Traceback" not in stderr and stderr.strip().splitlines()[-1].startswith("corpuscle: "), stderr
     assert "SIGTERM" in stderr
+
+
+# --- concurrent writers: one at a time, the second told who holds the file ----------------
+
+def test_a_second_writer_of_a_file_is_refused_naming_the_holder(tmp_path):
+    path = tmp_path / "w.cps"
+    first = FrameWriter(path, {"scene": "first"})
+    try:
+        first.write_frame(0, 0.0, 0.1, {"position": np.zeros((10, 3), np.float32)})
+        for second in (lambda: FrameWriter(path, {"scene": "second"}), lambda: FrameWriter.append(path)):
+            with pytest.raises(OSError, match=rf"w\.cps: is being written by process {os.getpid()}\b"):
+                second()
+        first.write_frame(1, 0.1, 0.1, {"position": np.ones((10, 3), np.float32)})
+    finally:
+        first.close()
+    with corpuscle.open(path) as run:  # the first writer's frames, whole and alone
+        assert run.header["scene"] == "first" and list(run.steps) == [0, 1]
+        run.verify()
+    FrameWriter(path, {"scene": "after"}).close()  # closed: the file is free again
+    assert listing(tmp_path) == {"w.cps"}  # and no temporary file is left beside it
+
+
+@needs_core
+@pytest.mark.parametrize("second", [
+    pytest.param(("run", "magic8ball", "--backend", "cpu", "--particles", "300", "--steps", "10"), id="run"),
+    pytest.param(("run", "--resume"), id="resume"),
+])
+def test_a_second_run_of_the_same_out_is_refused_while_the_first_writes(tmp_path, second):
+    out = tmp_path / "c.cps"
+    first = _long_run(out, "--checkpoint-every", "100000")
+    try:
+        assert first.poll() is None, first.communicate()
+        argv = (*second, str(out)) if second[-1] == "--resume" else (*second, "--out", str(out))
+        p = run_cli(*argv)
+        assert_one_line_error(p, f"{out}: is being written by process {first.pid}")
+    finally:
+        first.send_signal(signal.SIGINT)
+        _, stderr = first.communicate(timeout=30)
+    assert first.returncode == 130, stderr
+    with corpuscle.open(out) as run:
+        assert len(run) == 2 and run.header["particles"] == 300
+        run.verify()
+
+
+# --- files from elsewhere: only a frame stream is replaced, and never under a reader -------
+
+FOREIGN = {
+    "notes.txt": b"my notes: do not lose these\n",
+    "naca.dat": b"NACA 0012\n1.0 0.00126\n0.5 0.0\n0.0 0.0\n0.5 -0.0\n1.0 -0.00126\n",
+    "scene.toml": b'kind = "magic8ball"\n[fluid]\nparticles = 300\n',
+    "picture.png": b"\x89PNG\r\n\x1a\n" + bytes(100),
+    "almost.cps": b"\x89CPS\r\n",  # a prefix of the magic is not a frame stream
+}
+
+
+@pytest.mark.parametrize("name", FOREIGN)
+def test_the_api_never_replaces_a_file_that_is_not_a_frame_stream(tmp_path, name):
+    path = tmp_path / name
+    path.write_bytes(FOREIGN[name])
+    with pytest.raises(FileExistsError, match=rf"{name}: exists and is not a corpuscle frame stream"):
+        FrameWriter(path, {"scene": "t"})
+    assert path.read_bytes() == FOREIGN[name] and listing(tmp_path) == {name}
+    FrameWriter(path, {"scene": "t"}, force=True).close()
+    with corpuscle.open(path) as run:
+        assert run.header == {"scene": "t"}
+
+
+@needs_core
+@pytest.mark.parametrize("name", ["notes.txt", "naca.dat", "scene.toml"])
+def test_run_never_replaces_a_file_that_is_not_a_frame_stream_without_force(tmp_path, name):
+    path = tmp_path / name
+    path.write_bytes(FOREIGN[name])
+    argv = (*RUN, "--steps", "5", "--every", "5", "--out", str(path))
+    assert_one_line_error(run_cli(*argv), f"--out {path}: exists and is not a corpuscle frame stream")
+    assert path.read_bytes() == FOREIGN[name]
+    p = run_cli(*argv, "--force")
+    assert p.returncode == 0, p.stderr
+    with corpuscle.open(path) as run:
+        assert list(run.steps) == [0, 5]
+
+
+_READER = """
+    import sys, zlib
+    import corpuscle
+    from corpuscle.io import FrameStreamError
+    run = corpuscle.open(sys.argv[1])
+    print(len(run), flush=True)
+    sys.stdin.readline()  # meanwhile the file is rewritten or cut
+    try:
+        crc = [zlib.crc32(f["position"].tobytes()) for f in run]
+        run.verify()
+        print(crc, flush=True)
+    except FrameStreamError as exc:
+        print("error:", exc, flush=True)
+"""
+
+
+def _rewrite(path):
+    _write_run(path, frames=1, n=10, seed=1)
+
+
+def _resume_cut(path):
+    with FrameWriter.append(path, keep=1) as w:
+        w.write_frame(1, 0.1, 0.1, {"position": np.zeros((10, 3), np.float32)})
+
+
+@pytest.mark.parametrize("change", [_rewrite, _resume_cut], ids=["a new run", "a resume that cuts frames"])
+def test_a_reader_keeps_the_run_it_opened_when_a_writer_replaces_it(tmp_path, change):
+    path = tmp_path / "r.cps"
+    _write_run(path)
+    with corpuscle.open(path) as run:
+        want = [zlib.crc32(f["position"].tobytes()) for f in run]
+    reader = _python(_READER, path)
+    assert reader.stdout.readline().strip() == "3", reader.communicate()
+    change(path)  # used to truncate the file under the reader's map: SIGBUS
+    out, err = reader.communicate("go\n", timeout=60)
+    assert reader.returncode == 0, (reader.returncode, err)
+    assert out.strip() == str(want)
+    with corpuscle.open(path) as run:  # and the file holds the new run
+        assert len(run) in (1, 2) and run[0]["position"].shape[0] in (10, 5000)
+
+
+def test_a_file_cut_short_under_a_reader_is_one_line_not_a_signal(tmp_path):
+    path = tmp_path / "t.cps"
+    _write_run(path)
+    reader = _python(_READER, path)
+    assert reader.stdout.readline().strip() == "3", reader.communicate()
+    os.truncate(path, 4096)  # another program (not corpuscle's writer) cuts it in place
+    out, err = reader.communicate("go\n", timeout=60)
+    assert reader.returncode == 0, (reader.returncode, err)
+    lines = out.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {path}: the file was cut to 4096 bytes"), out

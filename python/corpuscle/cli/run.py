@@ -43,6 +43,8 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", metavar="FILE.cps", help="output frame stream (default: <scene name>.cps here; "
                                                      "with --resume: the resumed file itself)")
+    p.add_argument("--force", action="store_true",
+                   help="replace --out even when it is not a corpuscle frame stream (a .cps)")
     p.add_argument("--every", metavar="K", help="record a frame every K steps (sets run.record_every)")
     p.add_argument("--checkpoint-every", metavar="K",
                    help="make every recorded frame at a multiple of K steps a checkpoint (the full state to "
@@ -215,7 +217,7 @@ def _start_viewer(args: argparse.Namespace, sim, header: dict[str, Any]):
     return viewer
 
 
-def _open_writer(io, plan: RunPlan, header: dict[str, Any]):
+def _open_writer(io, plan: RunPlan, header: dict[str, Any], args: argparse.Namespace):
     """A new frame stream, or (resuming in place) the recorded one cut back to its checkpoint."""
     out = plan.out
     try:
@@ -224,7 +226,7 @@ def _open_writer(io, plan: RunPlan, header: dict[str, Any]):
         if plan.resume is not None:
             header = dict(plan.resume["header"], resumed_from=str(plan.resume["path"]),
                           resumed_at_step=plan.resume["step"], command=header["command"])
-        return io.FrameWriter(out, header)
+        return io.FrameWriter(out, header, force=bool(getattr(args, "force", False)))
     except OSError as exc:
         error = UsageError(f"cannot write {out}: {exc.strerror or one_line(exc)}")
         if exc.errno in _DISK_FULL:
@@ -260,7 +262,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     viewer = _start_viewer(args, sim, header)
     try:
         live = _live_render(args, header)
-        writer = _open_writer(io, plan, header)
+        writer = _open_writer(io, plan, header, args)
     except BaseException:
         if viewer is not None:
             viewer.close()
