@@ -225,3 +225,35 @@ def test_a_file_cut_short_under_a_reader_is_one_line_not_a_signal(tmp_path):
     assert reader.returncode == 0, (reader.returncode, err)
     lines = out.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}: the file was cut to 4096 bytes"), out
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec") / "rec.cps"
+    p = run_cli(*RUN, "--steps", "10", "--every", "5", "--out", str(out))
+    assert p.returncode == 0, p.stderr
+    return out
+
+
+OTHER_OUTPUTS = [  # (argv with {run} and {out}, the output's name): each writes a user-named file
+    (("render", "{run}", "-o", "{out}"), "movie.png"),
+    (("render", "{run}", "-o", "{out}"), "movie.mp4"),
+    (("plot", "{run}", "-o", "{out}"), "figure.svg"),
+    (("plot", "{run}", "-o", "{out}"), "figure.pdf"),
+    (("bench", "magic8ball", "--backend", "cpu", "--particles", "300", "--steps", "1", "--json", "{out}"), "b.json"),
+]
+
+
+@needs_core
+@pytest.mark.parametrize("argv,name", OTHER_OUTPUTS, ids=[f"{a[0]}-{n}" for a, n in OTHER_OUTPUTS])
+def test_no_command_replaces_a_file_of_another_kind_without_force(tmp_path, recorded, argv, name):
+    path = tmp_path / name
+    path.write_bytes(FOREIGN["notes.txt"])
+    args = [a.format(run=recorded, out=path) for a in argv]
+    p = run_cli(*args)
+    assert_one_line_error(p, f"cannot write {path}: it exists and is not a {path.suffix} output")
+    assert path.read_bytes() == FOREIGN["notes.txt"]
+    if argv[0] == "plot":
+        p = run_cli(*args, "--force")
+        assert p.returncode == 0, p.stderr
+        assert path.read_bytes() != FOREIGN["notes.txt"]

@@ -71,6 +71,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)  # usage errors exit 2 here
     args._argv = argv
     install_stop_signals()  # SIGTERM and SIGHUP stop a command as Ctrl-C does
+    if getattr(args, "force", False):  # outputs of another kind may be replaced
+        from .._viz_common import FORCE_OUTPUT
+
+        FORCE_OUTPUT.set(True)
     try:
         return int(args._handler(args) or 0)
     except KeyboardInterrupt as exc:
