@@ -226,7 +226,8 @@ def _open_writer(io, plan: RunPlan, header: dict[str, Any], args: argparse.Names
         if plan.resume is not None:
             header = dict(plan.resume["header"], resumed_from=str(plan.resume["path"]),
                           resumed_at_step=plan.resume["step"], command=header["command"])
-        return io.FrameWriter(out, header, force=bool(getattr(args, "force", False)))
+        force = {"force": True} if getattr(args, "force", False) else {}  # a file that is not a .cps
+        return io.FrameWriter(out, header, **force)
     except OSError as exc:
         error = UsageError(f"cannot write {out}: {exc.strerror or one_line(exc)}")
         if exc.errno in _DISK_FULL:
