@@ -88,6 +88,14 @@ def prepare(args: argparse.Namespace) -> RunPlan:
     ckpt = int_option("--checkpoint-every", args.checkpoint_every, minimum=1)
     args.device = int_option("--device", args.device, minimum=0)
     live_options(args, needs_live=True)
+    if getattr(args, "no_token", False):
+        from ..live.server import is_local
+
+        if not getattr(args, "live", False):
+            raise UsageError("--no-token is an option of the live view: add --live")
+        if not is_local(args.host):
+            raise UsageError(f"--no-token: only on this machine's own address (127.0.0.1, localhost, ::1), "
+                             f"not --host {args.host}")
     if args.resume:
         if args.time is not None and not args.time > 0:
             raise UsageError(f"--time must be a positive number of seconds, got {args.time:g}")

@@ -60,6 +60,9 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
 
     render.add_live_render_arguments(p)
     add_live_arguments(p, "--live: ")
+    p.add_argument("--no-token", action="store_true",
+                   help="--live: steer the run without the token in the URL (on 127.0.0.1 only; any web page "
+                        "this machine opens can then reach it)")
     p.add_argument("--live", action="store_true",
                    help="also serve a live view of the run at http://127.0.0.1:PORT/ (WebGL2 page; shake the "
                         "8-ball from the keyboard, pause, resume); needs pip install \".[viewer]\"")
@@ -209,7 +212,8 @@ def _start_viewer(args: argparse.Namespace, sim, header: dict[str, Any]):
         return None
     live = importlib.import_module("corpuscle.live")
     try:
-        viewer = live.RunViewer.start(sim, header, host=args.host, port=args.port)
+        viewer = live.RunViewer.start(sim, header, host=args.host, port=args.port,
+                                      require_token=not getattr(args, "no_token", False))
     except live.ServerError as exc:
         raise UsageError(f"--live: {one_line(exc)}") from None
     err(live_url_message(viewer.server, "live view"))
