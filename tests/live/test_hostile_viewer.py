@@ -208,3 +208,15 @@ def test_a_live_run_needs_its_token_to_be_steered_unless_the_user_opted_out():
         assert opted_out.server.token is None and "token" not in opted_out.url
     finally:
         opted_out.close()
+
+
+@pytest.mark.parametrize("argv,words", [
+    (("--no-token",), "--no-token is an option of the live view: add --live"),
+    (("--live", "--no-token", "--host", "0.0.0.0"), "--no-token: only on this machine's own address"),
+])
+def test_opting_out_of_the_token_is_for_a_local_live_run_only(tmp_path, argv, words):
+    from cli_script import assert_one_line_error, corpuscle as run_cli
+
+    p = run_cli("run", "magic8ball", "--steps", "1", "--out", tmp_path / "o.cps", *argv)
+    assert_one_line_error(p, words)
+    assert not (tmp_path / "o.cps").exists()
