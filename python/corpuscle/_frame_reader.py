@@ -5,6 +5,7 @@ read-only views). The public names are :mod:`corpuscle.io`'s; the format is
 
 from __future__ import annotations
 
+import io as _io
 import math
 import mmap
 import operator
@@ -155,6 +156,7 @@ class Run:
     def __init__(self, path, *, _stacklevel: int = 2):
         self.path = os.fspath(path)
         self._mm = None
+        self._fh = None
         self._entries: list[_Entry] = []
         self._meta: dict[int, dict] = {}
         self._verified: set[int] = set()
@@ -170,14 +172,20 @@ class Run:
             if st.st_size == 0:
                 raise FrameStreamError(f"{self.path}: empty file, not a corpuscle frame stream")
             mm = mmap.mmap(fd, 0, access=mmap.ACCESS_READ)
-        finally:
+            # the descriptor stays open: a file cut short under the map (by another program;
+            # corpuscle's writers never do it) is found before a read past its end would be
+            # a SIGBUS
+            self._fh = _io.FileIO(fd, "rb", closefd=True)
+        except BaseException:
             os.close(fd)
+            raise
         # header and frame index; unmap again if either is unreadable
         try:
             self.version, self.header, first = self._read_file_header(mm)
             trailing = self._scan(mm, first)
         except BaseException:
             mm.close()
+            self._fh.close()
             raise
         self._mm = mm
         self._first = first
@@ -396,9 +404,16 @@ class Run:
             self._check_frame(i)
 
     def _check_open(self) -> None:
-        """Refuse to read from a closed run."""
+        """Refuse to read from a closed run, or from a file cut short since it was opened."""
         if self._mm is None:
             raise ValueError(f"{self.path}: run is closed")
+        try:
+            size = os.fstat(self._fh.fileno()).st_size
+        except (OSError, ValueError):
+            return
+        if size < len(self._mm):
+            raise FrameStreamError(f"{self.path}: the file was cut to {size} bytes while it was read "
+                                   f"({len(self._mm)} when opened): another program rewrote it; open it again")
 
     def _meta_or_none(self, i: int):
         """Frame ``i``'s table, or None if its header is unreadable (checked by its CRC)."""
@@ -497,6 +512,9 @@ class Run:
         """Release the memory map; arrays still viewing it keep it alive until they go."""
         # close() fails while arrays view the map; the garbage collector unmaps it later
         mm, self._mm = self._mm, None
+        fh = getattr(self, "_fh", None)
+        if fh is not None:
+            fh.close()
         if mm is not None:
             try:
                 mm.close()

@@ -9,6 +9,7 @@ subclass) so each subcommand reports bad input in its own name.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import importlib
 import math
 import os
@@ -278,8 +279,30 @@ def parse_size(spec: str | tuple[int, int], error: type[ValueError], lo: int = 1
     return w, h
 
 
-def check_file_output(path: str | os.PathLike, error: type[ValueError]) -> Path:
-    """An output file path whose folder exists and is writable."""
+# what an output file of each kind starts with: an existing file that does not is someone
+# else's (a scene, a recorded run, notes) and is replaced only with --force
+_OUTPUT_STARTS = {
+    ".png": (b"\x89PNG\r\n\x1a\n",), ".gif": (b"GIF87a", b"GIF89a"), ".pdf": (b"%PDF",),
+    ".svg": (b"<?xml", b"<svg"), ".json": (b"[", b"{"), ".csv": None,
+}
+FORCE_OUTPUT = contextvars.ContextVar("corpuscle_force_output", default=False)
+
+
+def _ours(p: Path, start: bytes) -> bool:
+    """Whether an existing output file's first bytes are those of the kind its name says."""
+    suffix = p.suffix.lower()
+    if suffix in (".mp4", ".m4v", ".mov"):
+        return start[4:8] == b"ftyp"
+    if suffix == ".csv":
+        return start.lstrip()[:1].isalpha() and b"\0" not in start
+    starts = _OUTPUT_STARTS.get(suffix)
+    return bool(starts) and start.lstrip().startswith(starts)
+
+
+def check_file_output(path: str | os.PathLike, error: type[ValueError], force: bool | None = None) -> Path:
+    """An output file path whose folder exists and is writable, and that is not an existing
+    file of another kind than its name says (unless ``force``; default: the command's
+    ``--force``, :data:`FORCE_OUTPUT`)."""
     p = Path(os.fspath(path))
     if p.is_dir():
         raise error(f"cannot write {p}: it is a directory")
@@ -288,6 +311,22 @@ def check_file_output(path: str | os.PathLike, error: type[ValueError]) -> Path:
         raise error(f"cannot write {p}: folder {parent} does not exist")
     if not os.access(parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
         raise error(f"cannot write {p}: permission denied")
+    if not (FORCE_OUTPUT.get() if force is None else force):
+        start = b""
+        try:
+            fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))  # a pipe is not waited on
+        except OSError:
+            fd = None
+        if fd is not None:
+            try:
+                start = os.read(fd, 64) if stat.S_ISREG(os.fstat(fd).st_mode) else b""
+            except OSError:
+                pass
+            finally:
+                os.close(fd)
+        if start and not _ours(p, start):
+            raise error(f"cannot write {p}: it exists and is not a {p.suffix or 'file of this'} output "
+                        f"(it starts {start[:16]!r}); --force replaces it")
     return p
 
 

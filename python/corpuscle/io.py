@@ -34,6 +34,7 @@ The reader bounds what it accepts (JSON nesting and lengths, array shapes, table
 from __future__ import annotations
 
 import builtins
+import errno
 import json
 import operator
 import os
@@ -46,6 +47,8 @@ import numpy as np
 
 __all__ = [
     "FORMAT_VERSION",
+    "FileBusyError",
+    "ForeignFileError",
     "Frame",
     "FrameStreamError",
     "FrameWriter",
@@ -59,6 +62,23 @@ from ._frame_format import (  # noqa: F401  (the format's public names are this 
     MAX_NDIM, MAX_TABLE_JSON, _FILE_HEAD, _FRAME_HEAD, _KIND_CODES, _RESERVED_SERIES, _ZEROS, FrameStreamError,
     TruncatedRunWarning, _align, _as_le_array, _encode_scalar, _json_default, _json_depth)
 from ._frame_reader import Frame, Run, open  # noqa: F401,A004  (corpuscle.io is their public home)
+from . import _frame_claim as _claim
+from ._frame_claim import FileBusyError, ForeignFileError  # noqa: F401  (public here)
+
+
+def _copy_prefix(src: int, dst: int, length: int) -> None:
+    """Copy the first ``length`` bytes of the file open at ``src`` to ``dst`` (at its start)."""
+    done = 0
+    while done < length:
+        chunk = min(length - done, 1 << 24)
+        try:
+            k = os.copy_file_range(src, dst, chunk, done, done)
+        except (AttributeError, OSError):
+            data = os.pread(src, chunk, done)
+            k = os.pwrite(dst, data, done) if data else 0
+        if k <= 0:
+            raise OSError(errno.EIO, "short copy of the kept frames")
+        done += k
 
 
 class FrameWriter:
@@ -71,11 +91,15 @@ class FrameWriter:
     so a reader, or a crash, sees only whole frames plus at most one partial frame at the
     end, which the reader drops with a ``TruncatedRunWarning``.
 
-    An existing file at ``path`` is replaced. Use as a context manager, or call ``close()``.
+    An existing frame stream at ``path`` is replaced (a new file renamed over it, so a reader
+    of the old one keeps it whole); any other existing file only with ``force=True``
+    (``ForeignFileError`` otherwise). The writer holds an exclusive lock on its file until it
+    is closed: a second writer of the same file gets ``FileBusyError`` naming the holder's pid.
+    Use as a context manager, or call ``close()``.
     ``header`` (attribute) is the header as a reader will see it (after the JSON round trip).
     """
 
-    def __init__(self, path, header: dict):
+    def __init__(self, path, header: dict, *, force: bool = False):
         self.path = os.fspath(path)
         self._file = None
         # the header must be a JSON object
@@ -103,18 +127,43 @@ class FrameWriter:
         pad = _ZEROS[: first - _FILE_HEAD.size - len(body)]
         fixed = _FILE_HEAD.pack(FILE_MAGIC, FORMAT_VERSION, 0, len(body), 0, 0)[:28]
         crc = zlib.crc32(pad, zlib.crc32(body, zlib.crc32(fixed)))
-        # unbuffered: every write goes straight to the operating system
-        self._file = builtins.open(self.path, "wb", buffering=0)
+        head = b"".join((fixed, struct.pack("<I", crc), body, pad))
         self._end = 0
         self._count = 0
+        real = _claim.target(self.path)
         try:
-            self._write_all(b"".join((fixed, struct.pack("<I", crc), body, pad)))
-        except BaseException:
-            # not even the header fits (a full disk): leave no empty, unreadable file behind
-            self._file.close()
-            if stat.S_ISREG(os.stat(self.path).st_mode):
-                os.unlink(self.path)
-            raise
+            mode = os.stat(real).st_mode
+        except FileNotFoundError:
+            mode = None
+        if mode is not None and stat.S_ISDIR(mode):
+            raise IsADirectoryError(errno.EISDIR, "is a folder", self.path)
+        if mode is not None and not stat.S_ISREG(mode):
+            # a device or a pipe (--out /dev/null): written as it is (unbuffered)
+            self._file = builtins.open(real, "wb", buffering=0)
+            try:
+                self._write_all(head)
+            except BaseException:
+                self._file.close()
+                raise
+            return
+        # a new file beside the old one, locked, renamed over it once its header is written:
+        # a reader of the old one keeps it whole, and a second writer is refused
+        with _claim.folder_lock(real):
+            old = _claim.check_old(real, force)
+            try:
+                fd, tmp = _claim.new_file(real)
+                self._file = os.fdopen(fd, "wb", buffering=0)  # unbuffered: straight to the system
+                try:
+                    self._write_all(head)
+                    os.rename(tmp, real)
+                except BaseException:
+                    # not even the header fits (a full disk): the old file stays as it was
+                    self._file.close()
+                    os.unlink(tmp)
+                    raise
+            finally:
+                if old is not None:
+                    os.close(old)
 
     @classmethod
     def append(cls, path, *, keep: int | None = None) -> "FrameWriter":
@@ -131,6 +180,18 @@ class FrameWriter:
         left as it was.
         """
         path = os.fspath(path)
+        real = _claim.target(path)
+        with _claim.folder_lock(real):
+            # a run still writing the file is not resumed under its feet (under the folder's
+            # lock, its own is taken again by the appending descriptor)
+            old = _claim.check_old(real, True)
+            if old is not None:
+                os.close(old)
+            return cls._append_locked(path, real, keep)
+
+    @classmethod
+    def _append_locked(cls, path: str, real: str, keep) -> "FrameWriter":
+        """``append``, holding the folder's and the file's locks."""
         # index and check the file with the reader; a torn tail is expected here, not warned
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", TruncatedRunWarning)
@@ -152,14 +213,26 @@ class FrameWriter:
             header = run.header
         finally:
             run.close()
-        # cut what follows the last kept frame, then continue after it
+        # continue after the last kept frame: in place when nothing follows it, else in a copy
+        # of the kept frames renamed over the file (a reader of it is never cut short)
         self = cls.__new__(cls)
         self.path, self.header, self._count, self._end = path, header, n, end
-        self._file = builtins.open(path, "r+b", buffering=0)
+        self._file = builtins.open(real, "r+b", buffering=0)
         try:
             if os.fstat(self._file.fileno()).st_size != end:
-                os.ftruncate(self._file.fileno(), end)
-                os.fsync(self._file.fileno())
+                fd, tmp = _claim.new_file(real)
+                try:
+                    _copy_prefix(self._file.fileno(), fd, end)
+                    os.fsync(fd)
+                    os.rename(tmp, real)
+                except BaseException:
+                    os.close(fd)
+                    os.unlink(tmp)
+                    raise
+                self._file.close()
+                self._file = os.fdopen(fd, "r+b", buffering=0)
+            else:
+                _claim.try_lock(self._file.fileno(), path)
             self._file.seek(end)
         except BaseException:
             self._file.close()

@@ -178,6 +178,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     """Add ``corpuscle plot``'s arguments to a (sub)parser."""
     p.add_argument("run", metavar="RUN", help="recorded run (frame stream file)")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output picture: .png, .pdf or .svg")
+    p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
     p.add_argument("--series", metavar="A,B,...", help="series to plot (default: every one the run has)")
     p.add_argument("--dpi", default=110, metavar="DPI", help="resolution of a .png (default 110)")
 

@@ -204,6 +204,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     """Add ``corpuscle render``'s arguments to a (sub)parser."""
     p.add_argument("run", metavar="RUN", help="recorded run (frame stream file)")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output: .mp4, .gif, .png or a directory")
+    p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
     p.add_argument("--frame", metavar="I", help="frame of a .png output (default: the last; negatives count from the end)")
     p.add_argument("--frames", metavar="A:B[:STEP]", help="frames of a video or directory (Python slice; default all)")
     p.add_argument("--size", metavar="WxH", default="1280x720", help="picture size in pixels (default 1280x720)")

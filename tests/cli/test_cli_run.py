@@ -36,7 +36,7 @@ class FakeWriter:
 
     def close(self):
         self.closed = True
-        self.path.write_bytes(b"fake")
+        self.path.write_bytes(b"\x89CPS\r\n\x1a\nfake")  # a frame stream's magic: a rerun may replace it
 
     def __enter__(self):
         return self

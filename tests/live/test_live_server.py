@@ -249,23 +249,28 @@ def test_pause_waits_without_stepping_until_resume():
     try:
         viewer.publish(sim, sim.frame())
 
-        async def send(msg):
+        async def go():
+            # the page stays connected while the run is paused (a page that is gone lets go)
             async with aiohttp.ClientSession() as cs, cs.ws_connect(ws_url(s)) as ws:
                 await ws.receive(timeout=10)
-                await ws.send_str(json.dumps(msg))
-                for _ in range(200):
-                    if s.paused == (msg["type"] == "pause"):
-                        break
-                    await asyncio.sleep(0.01)
 
-        asyncio.run(send({"type": "pause"}))
-        t = threading.Thread(target=viewer.between_chunks, args=(sim,), daemon=True)
-        t.start()
-        time.sleep(0.4)
-        assert t.is_alive() and int(sim.steps) == 0
-        asyncio.run(send({"type": "resume"}))
-        t.join(5)
-        assert not t.is_alive()
+                async def send(msg):
+                    await ws.send_str(json.dumps(msg))
+                    for _ in range(200):
+                        if s.paused == (msg["type"] == "pause"):
+                            break
+                        await asyncio.sleep(0.01)
+
+                await send({"type": "pause"})
+                t = threading.Thread(target=viewer.between_chunks, args=(sim,), daemon=True)
+                t.start()
+                await asyncio.sleep(0.4)
+                assert t.is_alive() and int(sim.steps) == 0
+                await send({"type": "resume"})
+                await asyncio.get_running_loop().run_in_executor(None, t.join, 5)
+                assert not t.is_alive()
+
+        asyncio.run(go())
     finally:
         s.stop()
 
@@ -320,6 +325,7 @@ class _Proc:
         self.drain.start()
         assert self.url, "".join(self.lines)
         self.port = int(re.search(r":(\d+)/", self.url).group(1))
+        self.ws = f"ws://127.0.0.1:{self.port}/ws" + self.url[self.url.find("?"):] * ("?" in self.url)
 
     def interrupt(self, timeout=60) -> int:
         self.p.send_signal(signal.SIGINT)
@@ -337,13 +343,13 @@ def test_run_live_streams_frames_and_rejects_bad_messages(tmp_path):
     proc = _Proc("run", "magic8ball", "--backend", "serial", "--particles", "300", "--steps", "1000000", "--every", "20",
                  "--live", "--port", "0", "--out", str(out), "--no-progress")
     try:
-        assert proc.url == f"http://127.0.0.1:{proc.port}/"
+        assert re.fullmatch(rf"http://127\.0\.0\.1:{proc.port}/\?token=[\w-]+", proc.url)  # steering needs it
 
         async def go():
             async with aiohttp.ClientSession() as cs:
                 async with cs.get(proc.url) as r:
                     assert r.status == 200 and "canvas" in await r.text()
-                async with cs.ws_connect(f"ws://127.0.0.1:{proc.port}/ws") as ws:
+                async with cs.ws_connect(proc.ws) as ws:
                     hello = json.loads((await ws.receive(timeout=30)).data)
                     assert hello["header"]["scene"] == "magic8ball" and hello["header"]["particles"] == 300
                     a = await receive_frame(ws, 30)
@@ -381,7 +387,7 @@ def test_view_serves_a_recorded_run_and_seeks(tmp_path):
     proc = _Proc("view", str(out), "--port", "0")
     try:
         async def go():
-            async with aiohttp.ClientSession() as cs, cs.ws_connect(f"ws://127.0.0.1:{proc.port}/ws") as ws:
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(proc.ws) as ws:
                 hello = json.loads((await ws.receive(timeout=30)).data)
                 assert hello["mode"] == "view" and hello["frames"] == 4 and "density" in hello["fields"]
                 assert (await receive_frame(ws))["index"] == 0
@@ -408,7 +414,7 @@ def test_run_live_wind_tunnel_sliders_and_frames_between_recorded_ones(tmp_path)
                  "--every", "100000", "--live", "--port", "0", "--out", str(out), "--no-progress")
     try:
         async def go():
-            async with aiohttp.ClientSession() as cs, cs.ws_connect(f"ws://127.0.0.1:{proc.port}/ws") as ws:
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(proc.ws) as ws:
                 hello = json.loads((await ws.receive(timeout=30)).data)
                 assert hello["controls"] == {"speed_scale": 1, "pitch": 1}
                 assert hello["control"] == {"speed_scale": [0.0], "pitch": [0.0]}

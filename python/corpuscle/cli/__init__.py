@@ -9,8 +9,9 @@ one line ``corpuscle: error: ...`` on stderr, never a traceback. Scenes are load
 validated before the compiled core is imported, so those errors need no build.
 
 Exit codes: 0 success, 2 bad input, 3 run stopped by a health check, 4 the output could not
-be written (disk full ...; the frames written so far are kept), 130 interrupted, 141 stdout
-closed (broken pipe).
+be written (disk full ...; the frames written so far are kept), 130 interrupted (Ctrl-C;
+SIGTERM and SIGHUP stop a command the same way, exit 143 and 129: 128 + the signal), 141
+stdout closed (broken pipe).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import sys
 from typing import Sequence
 
 from ..scene import SceneError
+from ._common import install_stop_signals, interrupt_exit_code, signal_name
 from ._options import (BACKENDS, COMMANDS, EXIT_INTERRUPTED, EXIT_OK, EXIT_STOPPED, EXIT_USAGE, PROG, Command,
                        Parser, UsageError, err, one_line, register)
 
@@ -68,12 +70,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)  # usage errors exit 2 here
     args._argv = argv
+    install_stop_signals()  # SIGTERM and SIGHUP stop a command as Ctrl-C does
+    if getattr(args, "force", False):  # outputs of another kind may be replaced
+        from .._viz_common import FORCE_OUTPUT
+
+        FORCE_OUTPUT.set(True)
     try:
         return int(args._handler(args) or 0)
-    except KeyboardInterrupt:
-        # Ctrl-C outside a run's loop (which reports its own): no traceback
-        err("interrupted")
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:
+        # Ctrl-C (SIGTERM, SIGHUP) outside a run's loop (which reports its own): no traceback
+        by = signal_name(exc)
+        err("interrupted" + (f" by {by}" if by else ""))
+        return interrupt_exit_code(exc)
     except BrokenPipeError:
         # stdout was closed early (`corpuscle bench ... | head`): stop quietly, as Unix tools do
         devnull = os.open(os.devnull, os.O_WRONLY)

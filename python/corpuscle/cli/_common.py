@@ -1,6 +1,6 @@
 """Pieces the run-like commands (run, bench) share: the record of what ran where (time,
-command line, build, device), Ctrl-C during a long initialisation, the lists index's
-relistings."""
+command line, build, device), the stop signals (Ctrl-C, SIGTERM, SIGHUP) and Ctrl-C during a
+long initialisation, the lists index's relistings."""
 
 from __future__ import annotations
 
@@ -17,6 +17,53 @@ import threading
 from typing import Any
 
 from ._options import EXIT_INTERRUPTED, PROG, err
+
+
+# what `timeout`, `docker stop`, a batch scheduler or a closed terminal send: each stops a
+# command as Ctrl-C does (the steps since the last frame saved, one line), exit 128 + signal
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+class Interrupted(KeyboardInterrupt):
+    """A stop signal other than SIGINT, raised where Ctrl-C raises KeyboardInterrupt."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = int(signum)
+
+
+def interrupt_exit_code(exc: BaseException | None = None) -> int:
+    """128 + the signal number: 130 for Ctrl-C (and a bare KeyboardInterrupt), 143 for
+    SIGTERM, 129 for SIGHUP."""
+    signum = getattr(exc, "signum", None)
+    return EXIT_INTERRUPTED if signum is None else 128 + signum
+
+
+def signal_name(exc: BaseException | None) -> str | None:
+    """``SIGTERM`` / ``SIGHUP`` for an :class:`Interrupted`, None for Ctrl-C."""
+    signum = getattr(exc, "signum", None)
+    return None if signum is None else signal.Signals(signum).name
+
+
+def _raise_interrupted(signum, _frame):
+    raise Interrupted(signum)
+
+
+def install_stop_signals() -> None:
+    """SIGTERM and SIGHUP raise :class:`Interrupted` (a KeyboardInterrupt), so every place
+    that handles Ctrl-C handles them too. A signal the parent set to be ignored (``nohup``)
+    stays ignored; only the main thread can do this."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for signum in STOP_SIGNALS:
+        if signum == signal.SIGINT:
+            continue
+        try:
+            if signal.getsignal(signum) in (signal.SIG_IGN, None):
+                continue
+            signal.signal(signum, _raise_interrupted)
+        except (OSError, ValueError):
+            pass
 
 
 def now_iso() -> str:
@@ -62,7 +109,8 @@ def device_name(backend: str, info: dict[str, Any] | None, device: int = 0) -> s
 
 @contextlib.contextmanager
 def interruptible_init(what: str):
-    """Ctrl-C during initialisation exits at once (130), with one line.
+    """Ctrl-C (or SIGTERM, SIGHUP) during initialisation exits at once (128 + the signal),
+    with one line.
 
     Placing and building a large scene is one long call into the core (a minute for
     2,000,000 particles on 2 cores), and Python runs its SIGINT handler only when that call
@@ -82,11 +130,13 @@ def interruptible_init(what: str):
         except OSError:
             return
         with lock:
-            if state["done"] or signal.SIGINT not in got:
+            stop = next((signum for signum in STOP_SIGNALS if signum in got), None)
+            if state["done"] or stop is None:
                 return
-            err(f"interrupted while {what}")
+            by = "" if stop == signal.SIGINT else f" by {signal.Signals(stop).name}"
+            err(f"interrupted{by} while {what}")
             sys.stderr.flush()
-            os._exit(EXIT_INTERRUPTED)
+            os._exit(128 + stop)
 
     try:
         previous = signal.set_wakeup_fd(wfd, warn_on_full_buffer=False)

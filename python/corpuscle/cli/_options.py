@@ -209,7 +209,9 @@ def live_options(args: argparse.Namespace, needs_live: bool) -> None:
 
 def live_url_message(server, what: str) -> str:
     text = f"{what} at {server.url} (Ctrl-C stops)"
-    if server.token:
+    from ..live.server import is_local
+
+    if server.token and not is_local(getattr(server, "host", "127.0.0.1")):
         text += "; the token in the URL is required: this address may be reachable from other machines"
     return text
 

@@ -47,8 +47,11 @@ def _out_path(text: str | None, default: pathlib.Path) -> pathlib.Path:
     return pathlib.Path(text)
 
 
-def _check_out(out: pathlib.Path, scene) -> None:
-    """The output folder must exist, and the output must not be a folder or the scene file."""
+def _check_out(out: pathlib.Path, scene, force: bool = False) -> None:
+    """The output folder must exist; the output must not be a folder or the scene file, nor a
+    file that is not a frame stream (without --force), nor a file another run is writing."""
+    from .._frame_claim import foreign_start, is_busy
+
     parent = out.parent if str(out.parent) else pathlib.Path(".")
     if not parent.is_dir():
         raise UsageError(f"--out {out}: folder {parent} does not exist")
@@ -56,6 +59,16 @@ def _check_out(out: pathlib.Path, scene) -> None:
         raise UsageError(f"--out {out}: is a folder")
     if scene is not None and scene.path and same_file(out, pathlib.Path(scene.path)):
         raise UsageError(f"--out {out}: is the scene file being run; choose another output")
+    try:
+        start = None if force else foreign_start(out)
+    except OSError as exc:
+        raise UsageError(f"--out {out}: cannot read it: {exc.strerror or exc}") from None
+    if start is not None:
+        raise UsageError(f"--out {out}: exists and is not a corpuscle frame stream (it starts {start[:16]!r}); "
+                         "--force replaces it")
+    busy = is_busy(out)
+    if busy is not None:
+        raise UsageError(f"--out {out}: {busy.strerror}")
 
 
 def _check_render(args: argparse.Namespace, out: pathlib.Path) -> None:
@@ -75,6 +88,14 @@ def prepare(args: argparse.Namespace) -> RunPlan:
     ckpt = int_option("--checkpoint-every", args.checkpoint_every, minimum=1)
     args.device = int_option("--device", args.device, minimum=0)
     live_options(args, needs_live=True)
+    if getattr(args, "no_token", False):
+        from ..live.server import is_local
+
+        if not getattr(args, "live", False):
+            raise UsageError("--no-token is an option of the live view: add --live")
+        if not is_local(args.host):
+            raise UsageError(f"--no-token: only on this machine's own address (127.0.0.1, localhost, ::1), "
+                             f"not --host {args.host}")
     if args.resume:
         if args.time is not None and not args.time > 0:
             raise UsageError(f"--time must be a positive number of seconds, got {args.time:g}")
@@ -84,7 +105,7 @@ def prepare(args: argparse.Namespace) -> RunPlan:
     scene = load_with_options(args, RUN_OPTIONS)
     every = int(scene["run.record_every"])
     out = _out_path(args.out, pathlib.Path(f"{safe_filename(scene.name)}.cps"))
-    _check_out(out, scene)
+    _check_out(out, scene, bool(getattr(args, "force", False)))
     _check_render(args, out)
     if ckpt is not None and ckpt % every:
         raise UsageError(f"--checkpoint-every {ckpt} must be a multiple of the record interval "
@@ -131,7 +152,7 @@ def _resume_prepare(args: argparse.Namespace, steps: int | None, ckpt: int | Non
     args.velocity = bool(args.velocity or header.get("velocity_recorded"))
     args.ghosts = bool(args.ghosts or header.get("ghosts_recorded"))
     out = _out_path(args.out, src)
-    _check_out(out, None)
+    _check_out(out, None, bool(getattr(args, "force", False)))
     _check_render(args, out)
     if ckpt is None:
         ckpt = header.get("checkpoint_every")

@@ -40,6 +40,7 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
                    help="time batches of B independent scenes stepped together (magic8ball; several values: a sweep); "
                         "reports scene-steps/s and particle-steps/s")
     p.add_argument("--json", metavar="FILE", help="also write the results as a JSON list of rows to FILE")
+    p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
     p.add_argument("--plot", metavar="FILE.png",
                    help="also plot particle-steps/s against particles, a line for each backend and index (PNG)")
     p.add_argument("--max-step", metavar="SECONDS",
@@ -98,6 +99,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             raise UsageError(f"--json {args.json}: folder {parent} does not exist")
         if pathlib.Path(args.json).is_dir():
             raise UsageError(f"--json {args.json}: is a folder")
+        from .._viz_common import check_file_output
+
+        check_file_output(args.json, UsageError)
     simulation = import_core_module("corpuscle.simulation")
     Simulation = simulation.Simulation
     backends = list(dict.fromkeys(args.backend)) if args.backend else [

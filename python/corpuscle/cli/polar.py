@@ -28,6 +28,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--neighbors", metavar="INDEX", help="neighbour search (the kind's index: grid)")
     p.add_argument("--out", metavar="PREFIX", help="write PREFIX.csv and PREFIX.png (default: polar-SCENE)")
     p.add_argument("--no-plot", action="store_true", help="the CSV only")
+    p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
     p.add_argument("--no-progress", action="store_true", help="no progress lines")
 
 
@@ -46,6 +47,10 @@ def run_command(args: argparse.Namespace) -> int:
     prefix = pathlib.Path(args.out) if args.out else pathlib.Path(f"polar-{scene.name}")
     if not prefix.parent.is_dir():
         raise UsageError(f"--out {args.out}: folder {prefix.parent} does not exist")
+    from .._viz_common import check_file_output
+
+    for suffix in (".csv",) if args.no_plot else (".csv", ".png"):
+        check_file_output(f"{prefix}{suffix}", UsageError)
     for a in angles:  # every scene is checked before the first run
         scene.with_overrides({"airfoil.angle_of_attack": a})
     simulation = import_core_module("corpuscle.simulation")

@@ -18,8 +18,9 @@ from .. import _json
 from .. import kinds as _kinds
 from .._errors import DISK_FULL_ERRNOS as _DISK_FULL, EXIT_WRITE  # a full disk or a file size limit: exit 4
 from .._frame_sink import FrameSink
-from ._common import command_line, interruptible_init, now_iso, relistings
-from ._options import (BACKENDS, EXIT_INTERRUPTED, EXIT_OK, EXIT_STOPPED, PROG, Command, UsageError,
+from ._common import (STOP_SIGNALS, command_line, interrupt_exit_code, interruptible_init, now_iso, relistings,
+                      signal_name)
+from ._options import (BACKENDS, EXIT_OK, EXIT_STOPPED, PROG, Command, UsageError,
                        add_engine_options, add_live_arguments, err, fmt_rate, import_core_module, live_url_message,
                        one_line, particles_help, progress_enabled, register)
 from ._run_plan import RunPlan, checkpoint_state, prepare, same_file
@@ -42,6 +43,8 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", metavar="FILE.cps", help="output frame stream (default: <scene name>.cps here; "
                                                      "with --resume: the resumed file itself)")
+    p.add_argument("--force", action="store_true",
+                   help="replace --out even when it is not a corpuscle frame stream (a .cps)")
     p.add_argument("--every", metavar="K", help="record a frame every K steps (sets run.record_every)")
     p.add_argument("--checkpoint-every", metavar="K",
                    help="make every recorded frame at a multiple of K steps a checkpoint (the full state to "
@@ -57,6 +60,9 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
 
     render.add_live_render_arguments(p)
     add_live_arguments(p, "--live: ")
+    p.add_argument("--no-token", action="store_true",
+                   help="--live: steer the run without the token in the URL (on 127.0.0.1 only; any web page "
+                        "this machine opens can then reach it)")
     p.add_argument("--live", action="store_true",
                    help="also serve a live view of the run at http://127.0.0.1:PORT/ (WebGL2 page; shake the "
                         "8-ball from the keyboard, pause, resume); needs pip install \".[viewer]\"")
@@ -133,17 +139,28 @@ def _live_render(args: argparse.Namespace, header: dict[str, Any]):
 
 @contextlib.contextmanager
 def _interrupts_deferred():
-    """Ctrl-C while a frame is written takes effect once it is whole."""
+    """Ctrl-C (SIGTERM, SIGHUP) while a frame is queued takes effect once it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     hits: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, _frame: hits.append(signum))
+    previous = {}
+    for signum in STOP_SIGNALS:
+        handler = signal.getsignal(signum)
+        if handler in (signal.SIG_IGN, signal.SIG_DFL, None):
+            continue  # ignored (nohup) or not ours: left alone
+        previous[signum] = signal.signal(signum, lambda signum, _frame: hits.append(signum))
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
         if hits:
+            if hits[0] == signal.SIGINT:
+                raise KeyboardInterrupt
+            handler = previous.get(hits[0])
+            if callable(handler):
+                handler(hits[0], None)  # raises as the signal would have
             raise KeyboardInterrupt
 
 
@@ -195,7 +212,8 @@ def _start_viewer(args: argparse.Namespace, sim, header: dict[str, Any]):
         return None
     live = importlib.import_module("corpuscle.live")
     try:
-        viewer = live.RunViewer.start(sim, header, host=args.host, port=args.port)
+        viewer = live.RunViewer.start(sim, header, host=args.host, port=args.port,
+                                      require_token=not getattr(args, "no_token", False))
     except live.ServerError as exc:
         raise UsageError(f"--live: {one_line(exc)}") from None
     err(live_url_message(viewer.server, "live view"))
@@ -203,7 +221,7 @@ def _start_viewer(args: argparse.Namespace, sim, header: dict[str, Any]):
     return viewer
 
 
-def _open_writer(io, plan: RunPlan, header: dict[str, Any]):
+def _open_writer(io, plan: RunPlan, header: dict[str, Any], args: argparse.Namespace):
     """A new frame stream, or (resuming in place) the recorded one cut back to its checkpoint."""
     out = plan.out
     try:
@@ -212,7 +230,8 @@ def _open_writer(io, plan: RunPlan, header: dict[str, Any]):
         if plan.resume is not None:
             header = dict(plan.resume["header"], resumed_from=str(plan.resume["path"]),
                           resumed_at_step=plan.resume["step"], command=header["command"])
-        return io.FrameWriter(out, header)
+        force = {"force": True} if getattr(args, "force", False) else {}  # a file that is not a .cps
+        return io.FrameWriter(out, header, **force)
     except OSError as exc:
         error = UsageError(f"cannot write {out}: {exc.strerror or one_line(exc)}")
         if exc.errno in _DISK_FULL:
@@ -248,7 +267,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     viewer = _start_viewer(args, sim, header)
     try:
         live = _live_render(args, header)
-        writer = _open_writer(io, plan, header)
+        writer = _open_writer(io, plan, header, args)
     except BaseException:
         if viewer is not None:
             viewer.close()
@@ -257,7 +276,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     frames = 0
     last_recorded = start_steps
     stopped: str | None = None
-    interrupted = False
+    interrupted: KeyboardInterrupt | None = None
     write_error: str | None = None
     budget = None if plan.end_step is None else plan.end_step - start_steps
     progress = _Progress(progress_enabled(args), budget, plan.end_time)
@@ -312,8 +331,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     last_recorded = now
                     if viewer is not None:
                         viewer.stepped(sim, recorded=True)
-            except KeyboardInterrupt:
-                interrupted = True
+            except KeyboardInterrupt as exc:
+                interrupted = exc
                 if int(sim.steps) > last_recorded:
                     try:
                         _record(sink, sim, args, live)  # the whole step it stopped after
@@ -346,9 +365,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     # the writer is closed here, so every recorded frame is readable
 
     steps = int(sim.steps) - start_steps
-    if interrupted:
-        err(f"run interrupted at step {sim.steps}; {frames} frames kept in {out}")
-        return EXIT_INTERRUPTED
+    if interrupted is not None:
+        by = signal_name(interrupted)
+        err(f"run interrupted at step {sim.steps}; {frames} frames kept in {out}" + (f" ({by})" if by else ""))
+        return interrupt_exit_code(interrupted)
     result = None if stopped or write_error else dict(sim.result() or {})
     n = int(sim.n_particles)
     ghosts = getattr(sim, "n_ghosts", None)

@@ -15,6 +15,7 @@ def _configure_validate(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("name", metavar="NAME", help=f"what to validate: {', '.join(validation.VALIDATIONS)}")
     p.add_argument("--json", action="store_true", help="print the checks as JSON (after the table)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
     # each validation's own options; those of the one named are parsed in _cmd_validate
     p.add_argument("options", nargs=argparse.REMAINDER, help="the validation's options (NAME --help lists them)")
 
@@ -33,8 +34,21 @@ def options_parser(name: str):
 def _cmd_validate(args: argparse.Namespace) -> int:
     from .. import validation
 
+<<<<<<< HEAD
     module, sub = options_parser(args.name)
+=======
+    module = validation.load(args.name)  # unknown name: ValueError, one line, exit 2
+    sub = Parser(prog=f"{PROG} validate {args.name}", description=(module.__doc__ or "").strip().splitlines()[0])
+    sub.add_argument("--json", action="store_true", help="print the checks as JSON (and nothing else) on stdout")
+    sub.add_argument("--force", action="store_true", help="replace an existing output file of another kind than "
+                                                          "its name says")
+    module.add_arguments(sub)
+>>>>>>> h31c
     opts = sub.parse_args(args.options)  # bad options exit 2 with one line
+    if opts.force:
+        from .._viz_common import FORCE_OUTPUT
+
+        FORCE_OUTPUT.set(True)
     if args.json or opts.json:  # the JSON alone on stdout: the runs' own tables go to stderr
         with contextlib.redirect_stdout(sys.stderr):
             checks = module.run(opts)

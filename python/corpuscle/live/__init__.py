@@ -73,10 +73,12 @@ class RunViewer:
 
     @classmethod
     def start(cls, sim, header: dict[str, Any], host: str = "127.0.0.1", port: int = 8765,
-              token: str | None = None) -> "RunViewer":
+              token: str | None = None, require_token: bool = True) -> "RunViewer":
+        """Serve the run; the page and its controls need a random token (in :attr:`url`)
+        unless ``require_token`` is False on this machine's own address."""
         controls = {str(k): int(v) for k, v in dict(sim.core.controls()).items()} if hasattr(sim, "core") else {}
-        if token is None and not is_local(host):
-            token = make_token()
+        if token is None and (require_token or not is_local(host)):
+            token = make_token()  # a page of another site (DNS rebinding, a guessed port) cannot steer
         server = LiveServer(header, mode="live", host=host, port=port, token=token, controls=controls,
                             control=getattr(sim, "control", None), sliders=live_sliders(sim))
         return cls(server.start())

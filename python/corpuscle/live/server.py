@@ -15,6 +15,7 @@ import importlib.resources
 import ipaddress
 import logging
 import re
+import socket
 import sys
 import threading
 import time
@@ -31,6 +32,7 @@ CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' 
 LOCAL_NAMES = {"localhost", "127.0.0.1", "::1"}
 TRANSPORT_LIMIT = 64 * 1024  # a websocket message over this closes the connection
 CREDITS = 2  # frames in flight to a page that acknowledges them (one drawn, one on its way)
+HEARTBEAT = 20.0  # s between pings to a page; one that does not answer is closed
 
 
 class ServerError(OSError):
@@ -70,6 +72,9 @@ class _Client:
         # CREDITS frames it has not drawn yet (None: a client that never says it; the
         # socket's own back-pressure only)
         self.credits: int | None = None
+        # it sent a control, pause or resume: the run is held by it (a pause it set is
+        # released when the last such client is gone)
+        self.controlling = False
 
 
 class _OneLineLogger(logging.Logger):
@@ -238,7 +243,7 @@ class LiveServer:
         self._first_frame = asyncio.Event()
         if self._latest is not None or self.mode != "live":
             self._first_frame.set()
-        app = web.Application(client_max_size=TRANSPORT_LIMIT)
+        app = web.Application(client_max_size=TRANSPORT_LIMIT, middlewares=[self._host_check(web)])
         app.router.add_get("/", self._page)
         app.router.add_get("/ws", self._websocket)
         app.router.add_get("/static/{name}", self._static)
@@ -294,12 +299,59 @@ class LiveServer:
         given = request.query.get("token", "")
         return hmac.compare_digest(given.encode(), self.token.encode())
 
+    def _host_names(self) -> set[str]:
+        """The names a request may call this server by: the address it was started for, and
+        this machine's names where that address is local (or every address, 0.0.0.0 / ::)."""
+        names = {self.host.strip("[]").lower()}
+        if is_local(self.host) or _wildcard(self.host):
+            names |= {"localhost", "127.0.0.1", "::1", "localhost.localdomain"}
+        if _wildcard(self.host):
+            try:
+                names |= {socket.gethostname().lower(), socket.getfqdn().lower()}
+            except OSError:
+                pass
+        return names
+
+    def _allowed(self, authority: str | None) -> bool:
+        """Whether a Host (``name[:port]``) or an Origin's authority names this server: one of
+        :meth:`_host_names` (or, bound to every address, any IP address) and its port. A
+        name that only resolves here (DNS rebinding: another site's name) is refused."""
+        parts = _split_authority(authority or "")
+        if parts is None:
+            return False
+        name, port = parts
+        if (port or "80") != str(self.port):  # a browser leaves out http's own port, 80
+            return False
+        name = name.lower().rstrip(".")
+        if name in self._host_names():
+            return True
+        if _wildcard(self.host):
+            try:
+                ipaddress.ip_address(name)
+                return True
+            except ValueError:
+                return False
+        return False
+
+    def _host_check(self, web):
+        """Middleware: every request must name this server in its Host header."""
+        @web.middleware
+        async def check(request, handler):
+            if not self._allowed(request.headers.get("Host")):
+                self._reject(_peer(request), f"request for host {request.headers.get('Host', '')[:60]!r} "
+                                             "(not an address this server was started for)")
+                return web.Response(status=403, text="403: not this server's address\n")
+            return await handler(request)
+        return check
+
     def _same_origin(self, request) -> bool:
-        """A browser's websocket must come from this server's own page (not another site)."""
+        """A browser's websocket must come from this server's own page (not another site):
+        its Origin names one of this server's addresses and port."""
         origin = request.headers.get("Origin")
         if origin is None:
             return True  # not a browser
-        return origin in (f"http://{request.host}", f"https://{request.host}")
+        scheme, sep, authority = origin.partition("://")
+        return bool(sep) and scheme in ("http", "https") and "/" not in authority and self._allowed(authority)
 
     async def _page(self, request):
         web, _ = _import_aiohttp()
@@ -337,7 +389,9 @@ class LiveServer:
         if not self._same_origin(request):
             self._reject(peer, f"websocket from another origin ({request.headers.get('Origin', '')[:60]})")
             return web.Response(status=403, text="403: cross-origin websocket\n")
-        ws = web.WebSocketResponse(max_msg_size=TRANSPORT_LIMIT, heartbeat=None, compress=False)
+        # pings every HEARTBEAT s: a page that vanished without closing (a sleeping laptop, a
+        # dropped network) is noticed and let go like one that closed
+        ws = web.WebSocketResponse(max_msg_size=TRANSPORT_LIMIT, heartbeat=HEARTBEAT, compress=False)
         await ws.prepare(request)
         if self.mode == "live":
             await self._first_frame.wait()
@@ -368,7 +422,17 @@ class LiveServer:
         finally:
             self._clients.discard(client)
             sender.cancel()
+            self._let_go(client)
         return ws
+
+    def _let_go(self, client: _Client) -> None:
+        """A client is gone: when it steered the run and no other steering client is left, a
+        pause is released (a run is never held by a page that is gone)."""
+        if not client.controlling or any(c.controlling for c in self._clients):
+            return
+        if self._paused.is_set():
+            self._paused.clear()
+            self.log(f"pause released: {client.peer}, the last page steering the run, is gone")
 
     def _handle(self, client: _Client, data: str) -> None:
         try:
@@ -380,6 +444,8 @@ class LiveServer:
             self._reject(client.peer, str(exc))
             return
         kind = msg["type"]
+        if kind in ("control", "pause", "resume"):
+            client.controlling = True
         if kind != "ready":  # (flow control is not counted: tests count what the page asked for)
             self.accepted += 1
         if kind == "control":
@@ -490,6 +556,25 @@ def _scene_geometry(header: dict, log: Callable[[str], None]) -> dict | None:
 
 def _static_bytes(name: str) -> bytes:
     return (importlib.resources.files("corpuscle.live") / "static" / name).read_bytes()
+
+
+def _split_authority(authority: str) -> tuple[str, str] | None:
+    """``name[:port]`` or ``[v6]:port`` as (name, port), port "" when absent; None if malformed."""
+    if authority.startswith("["):
+        end = authority.find("]")
+        rest = authority[end + 1:] if end > 0 else "x"
+        if end < 0 or (rest and not rest.startswith(":")):
+            return None
+        return authority[1:end], rest[1:]
+    if authority.count(":") > 1 or not authority:
+        return None
+    name, _, port = authority.partition(":")
+    return (name, port) if name else None
+
+
+def _wildcard(host: str) -> bool:
+    """Whether ``host`` binds every address of this machine (0.0.0.0, ::, empty)."""
+    return host.strip("[]") in ("", "0.0.0.0", "::")
 
 
 def _peer(request) -> str:
