@@ -338,3 +338,37 @@ def test_viewer_bad_request_is_at_most_one_line(capfd, caplog, raw):
     assert not [r for r in caplog.records if r.exc_info], caplog.text  # logged tracebacks reach stderr
     assert "Traceback" not in err + out and err.count("\n") <= 1, err
     assert len(lines) <= 1 and all("\n" not in line and len(line) < 300 for line in lines), lines
+
+
+# ---- a measurement stops at a signal -------------------------------------------------------
+
+@pytest.mark.parametrize("sig, code", [("SIGINT", 130), ("SIGTERM", 143)])
+@pytest.mark.parametrize("args", [
+    ["bench", "magic8ball", "--backend", "serial", "--particles", "500", "--steps", "1000000", "--repeats", "1",
+     "--warmup", "0"],
+    ["bench", "magic8ball", "--backend", "serial", "--particles", "300", "--batch", "2", "--steps", "1000000",
+     "--repeats", "1", "--warmup", "0"],
+], ids=["single", "batch"])
+def test_a_benchmark_stops_within_a_second_or_two_of_a_signal(args, sig, code):
+    # a million timed steps would take hours: the core's bench looks at signals as step does
+    import signal
+    import subprocess
+    import time
+
+    from cli_script import script
+
+    p = subprocess.Popen([script(), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(4.0)  # well into the timed steps (initialisation takes a fraction of a second)
+        assert p.poll() is None, p.communicate()
+        t0 = time.monotonic()
+        p.send_signal(getattr(signal, sig))
+        out, errs = p.communicate(timeout=20)
+        took = time.monotonic() - t0
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.communicate()
+    assert p.returncode == code, errs
+    assert took < 5.0, took
+    assert "Traceback" not in errs and len(errs.strip().splitlines()) <= 1, errs

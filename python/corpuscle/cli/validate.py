@@ -27,6 +27,8 @@ def options_parser(name: str):
     module = validation.load(name)  # unknown name: ValueError, one line, exit 2
     sub = Parser(prog=f"{PROG} validate {name}", description=(module.__doc__ or "").strip().splitlines()[0])
     sub.add_argument("--json", action="store_true", help="print the checks as JSON (and nothing else) on stdout")
+    sub.add_argument("--force", action="store_true", help="replace an existing output file of another kind than "
+                                                          "its name says")
     module.add_arguments(sub)
     return module, sub
 
@@ -34,16 +36,7 @@ def options_parser(name: str):
 def _cmd_validate(args: argparse.Namespace) -> int:
     from .. import validation
 
-<<<<<<< HEAD
     module, sub = options_parser(args.name)
-=======
-    module = validation.load(args.name)  # unknown name: ValueError, one line, exit 2
-    sub = Parser(prog=f"{PROG} validate {args.name}", description=(module.__doc__ or "").strip().splitlines()[0])
-    sub.add_argument("--json", action="store_true", help="print the checks as JSON (and nothing else) on stdout")
-    sub.add_argument("--force", action="store_true", help="replace an existing output file of another kind than "
-                                                          "its name says")
-    module.add_arguments(sub)
->>>>>>> h31c
     opts = sub.parse_args(args.options)  # bad options exit 2 with one line
     if opts.force:
         from .._viz_common import FORCE_OUTPUT
