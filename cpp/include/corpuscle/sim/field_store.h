@@ -55,7 +55,7 @@ struct FieldBuffer {
     return true;                                                                  \
   }
 #define CPS_FS_UPLOAD_(name, T, comps, group, ckpt, settable, recorded, moves)                 \
-  if (field == #name) {                                                                        \
+  if (field == #name && ((settable) || (ckpt))) {                                              \
     ex.to_device(fields_.name.cur(parity), src, size_t(count) * sizeof(CPS_FS_ITEM_(T, comps))); \
     return true;                                                                               \
   }
@@ -67,7 +67,8 @@ struct FieldBuffer {
 // taking X and expanding to nothing when there are none). Inside its Pipeline: `Exec` is the
 // backend; `Ptrs` the struct with CPS_FIELD_PTRS(FIELDS) the stages take. Generates
 // field_table(), FieldStore `fields_` (resize(n): every buffer n slots; fill(ptrs, parity)),
-// field_bytes(n), and field_view / field_upload of the stored fields (the first `count` slots)
+// field_bytes(n), and field_view / field_upload of the stored fields (the first `count` slots;
+// field_upload takes what a user may set or a checkpoint restores, and returns false for the rest)
 #define CPS_KIND_STORED_TABLES(FIELDS, VIEWS, SCALARS, CONTROLS, Record, Control, Ptrs)           \
   CPS_KIND_SCALAR_TABLES_(SCALARS, CONTROLS, Record, Control)                                     \
   static std::vector<FieldInfo> field_table() {                                                   \

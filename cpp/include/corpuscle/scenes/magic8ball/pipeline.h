@@ -329,10 +329,7 @@ class Pipeline {
     const int n = total_fluid(m_);
     if (count != n) throw Error("magic8ball: " + name + " needs " + std::to_string(n) + " items");
     const int cur = parity_;
-    bool settable = false;
-    for (const FieldInfo& f : field_table()) settable = settable || (f.name == name && f.settable);
-    if (name != "id" && !settable) throw Error("magic8ball: field '" + name + "' cannot be set");
-    field_upload(ex_, name, src, n, cur);
+    if (!field_upload(ex_, name, src, n, cur)) throw Error("magic8ball: field '" + name + "' cannot be set");
     if (name == "position") {  // a new state: its particles numbered in order
       std::vector<int> ids(n);
       for (int i = 0; i < n; ++i) ids[i] = i;

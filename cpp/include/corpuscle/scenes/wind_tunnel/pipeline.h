@@ -155,9 +155,7 @@ class Pipeline {
     if (count != n) throw Error(std::string(kind) + ": " + name + " needs " + std::to_string(n) + " items");
     const int cur = parity_;
     // settable, or a checkpoint's (id, scattered)
-    bool accepted = false;
-    for (const FieldInfo& f : field_table()) accepted = accepted || (f.name == name && (f.settable || f.checkpointed));
-    if (!accepted || !field_upload(ex_, name, src, n, cur))
+    if (!field_upload(ex_, name, src, n, cur))
       throw Error(std::string(kind) + ": field '" + name + "' cannot be set");
     if (name == "position") {  // a new state: its particles numbered in order, none scattered
       std::vector<int> ids(n);
