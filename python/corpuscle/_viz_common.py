@@ -284,6 +284,7 @@ def parse_size(spec: str | tuple[int, int], error: type[ValueError], lo: int = 1
 _OUTPUT_STARTS = {
     ".png": (b"\x89PNG\r\n\x1a\n",), ".gif": (b"GIF87a", b"GIF89a"), ".pdf": (b"%PDF",),
     ".svg": (b"<?xml", b"<svg"), ".json": (b"[", b"{"), ".csv": None,
+    ".md": (b"# Validation report",),  # `validate all`'s report (any other Markdown is someone's notes)
 }
 FORCE_OUTPUT = contextvars.ContextVar("corpuscle_force_output", default=False)
 
