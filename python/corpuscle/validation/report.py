@@ -18,6 +18,7 @@ import contextlib
 import datetime as _dt
 import os
 import platform
+import re
 import shlex
 import sys
 import time
@@ -73,8 +74,7 @@ def module_argv(name: str, parser: argparse.ArgumentParser, backend: str | None,
 def _summary(module) -> str:
     doc = (module.__doc__ or "").strip()
     first = " ".join(doc.split("\n\n", 1)[0].split())
-    if first.startswith("``corpuscle validate") and "``: " in first:  # the command is in its own column
-        first = first.split("``: ", 1)[1]
+    first = re.sub(r"^`{1,2}corpuscle validate [^`]*`{1,2}:\s*", "", first)  # the command has its own column
     return first[:1].upper() + first[1:]
 
 
@@ -141,6 +141,16 @@ def _cell(text: str) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
+def _closest(checks: list[Check]) -> str:
+    """The check closest to its tolerance (of those with one), as a fraction of it."""
+    scored = [(abs(c.measured - c.reference) / c.tolerance, c) for c in checks
+              if c.tolerance > 0 and c.measured == c.measured and c.reference == c.reference]
+    if not scored:
+        return ""
+    f, c = max(scored, key=lambda x: x[0])
+    return f"; closest to its tolerance: {_cell(c.name)} ({f:.0%} of it)"
+
+
 def summary_rows(results: list[Result]) -> list[str]:
     """The summary table (Markdown lines): one row a validation."""
     rows = ["| validation | what it checks | command | result |", "|---|---|---|---|"]
@@ -148,7 +158,7 @@ def summary_rows(results: list[Result]) -> list[str]:
         if r.error:
             verdict = f"FAIL: could not run ({_cell(r.error)})"
         elif r.passed:
-            verdict = f"PASS: {len(r.checks)} of {len(r.checks)} checks"
+            verdict = f"PASS: {len(r.checks)} of {len(r.checks)} checks{_closest(r.checks)}"
         else:
             verdict = f"FAIL: {r.failed} of {len(r.checks)} checks"
         rows.append(f"| {r.name} | {_cell(r.summary)} | `{r.command}` | {verdict} |")
