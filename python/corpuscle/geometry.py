@@ -524,6 +524,33 @@ def signed_distance(body: Body, points) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
+def _where_sd(body: Body, pts: np.ndarray, pred, a: float, b: float, block: float) -> np.ndarray:
+    """pred(signed distance) for each point, where pred is false outside [a, b] and true
+    strictly inside it: points are binned in cubes of edge ``block``, the exact distance is
+    taken at each cube's centre, and only points whose cube's range of distances (the centre's
+    plus or minus the half diagonal: the distance changes no faster than the position) meets
+    a or b get their own (a closed body's signed distance is 1-Lipschitz)."""
+    out = np.zeros(len(pts), dtype=bool)
+    if len(pts) == 0:
+        return out
+    if not body.closed:
+        # an open body's signed distance jumps across its plane beyond its edges: every point
+        return pred(signed_distance(body, pts))
+    base = pts.min(axis=0)
+    idx = np.floor((pts - base) / block).astype(np.int64)
+    cubes, inverse = np.unique(idx, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    sd_c = signed_distance(body, base + (cubes + 0.5) * block)
+    r = 0.5 * block * math.sqrt(body.dim) * (1.0 + 1e-9)
+    sure = (sd_c - r > a) & (sd_c + r < b)
+    maybe = ~sure & (sd_c + r >= a) & (sd_c - r <= b)
+    out[sure[inverse]] = True
+    m = np.flatnonzero(maybe[inverse])
+    if m.size:
+        out[m] = pred(signed_distance(body, pts[m]))
+    return out
+
+
 def sample_boundary(body: Body, dp: float, layers: int, *, offset=None) -> np.ndarray:
     """A body's boundary particles: the points of the lattice (i + 1/2) dp + offset inside
     the body (signed distance <= 0) and within ``layers`` spacings of its surface (the
@@ -542,13 +569,13 @@ def sample_boundary(body: Body, dp: float, layers: int, *, offset=None) -> np.nd
         raise SceneError(f"body {body.name!r}: {cells:.3g} lattice cells in its bounds at spacing {dp:.3g} m "
                          f"(too many: a coarser spacing or a smaller body)")
     axes = [(np.arange(a, b) + 0.5) * dp + o for a, b, o in zip(c0, c1, off)]
+    band = layers * dp
     out = []
-    # one slab of the first axis at a time (bounded memory)
-    for x in axes[0]:
-        grids = np.meshgrid(np.array([x]), *axes[1:], indexing="ij")
+    # a few planes of the first axis at a time (bounded memory), distances in cubes of 4 dp
+    for s in range(0, len(axes[0]), 4):
+        grids = np.meshgrid(axes[0][s:s + 4], *axes[1:], indexing="ij")
         pts = np.column_stack([g.ravel() for g in grids])
-        sd = signed_distance(body, pts)
-        keep = (sd <= 0.0) & (sd > -layers * dp)
+        keep = _where_sd(body, pts, lambda sd: (sd <= 0.0) & (sd > -band), -band, 0.0, 4.0 * dp)
         out.append(pts[keep])
     return np.concatenate(out) if out else np.zeros((0, D))
 
@@ -564,8 +591,11 @@ def fluid_clear(bodies: Sequence[Body], points, dp: float, layers: int) -> np.nd
         near = np.flatnonzero(np.all((p >= lo - margin) & (p <= hi + margin), axis=1))
         if near.size == 0:
             continue
-        sd = signed_distance(b, p[near])
-        blocked = sd < 0.5 * dp if b.closed else (sd < 0.5 * dp) & (sd > -(layers + 0.5) * dp)
+        if b.closed:
+            blocked = _where_sd(b, p[near], lambda sd: sd < 0.5 * dp, -math.inf, 0.5 * dp, 4.0 * dp)
+        else:
+            deep = (layers + 0.5) * dp
+            blocked = _where_sd(b, p[near], lambda sd: (sd < 0.5 * dp) & (sd > -deep), -deep, 0.5 * dp, 4.0 * dp)
         keep[near[blocked]] = False
     return keep
 

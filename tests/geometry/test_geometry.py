@@ -302,3 +302,22 @@ def test_motion_table(tmp_path):
     with pytest.raises(SceneError) as e:
         g.read_motion_table(str(f), 3, "bodies[1].motion_file")
     assert "line 1" in one_line(e)
+
+
+def test_culled_sampling_equals_the_brute_force_one():
+    # sample_boundary and fluid_clear take exact distances only near the band (cubes of 4 dp):
+    # the same points as evaluating every one
+    dp, layers = 0.025, 3
+    for b in (body(shape="mesh", file=g.shipped_meshes()["sphere"], scale=2.0, position=[0.01, 0.02, -0.03]),
+              body(shape="box", size=[0.2, 0.3, 0.1], rotation=[15, 25, 35]),
+              body(shape="plane", size=[0.3, 0.2, 0], rotation=[0, 40, 0])):
+        lo, hi = b.bounds()
+        axes = [np.arange(np.floor(a / dp) - 6, np.ceil(c / dp) + 6) * dp + 0.5 * dp for a, c in zip(lo, hi)]
+        pts = np.column_stack([x.ravel() for x in np.meshgrid(*axes, indexing="ij")])
+        sd = g.signed_distance(b, pts)
+        got = g.sample_boundary(b, dp, layers)
+        want = pts[(sd <= 0) & (sd > -layers * dp)]
+        assert {tuple(x) for x in np.rint(got / dp - 0.5).astype(int)} == \
+               {tuple(x) for x in np.rint(want / dp - 0.5).astype(int)}, b.shape
+        blocked = sd < 0.5 * dp if b.closed else (sd < 0.5 * dp) & (sd > -(layers + 0.5) * dp)
+        assert np.array_equal(g.fluid_clear([b], pts, dp, layers), ~blocked), b.shape
