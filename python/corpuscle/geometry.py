@@ -470,9 +470,16 @@ def _closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.nda
 def _sd_mesh(p: np.ndarray, v: np.ndarray, f: np.ndarray, closed: bool) -> np.ndarray:
     """Signed distance to a triangle mesh (brute force, in chunks): the distance to the
     nearest triangle; the sign from the generalised winding number (closed; Jacobson et al.
-    2013) or, open, from the side of the nearest triangle's plane."""
+    2013) or, open, from the side of the nearest triangle's plane: behind it is inside unless
+    the nearest point lies on the mesh's open boundary (a thin wall's layers do not wrap
+    round its edges)."""
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     normal = np.cross(b - a, c - a)
+    if not closed:
+        e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        ue, cnt = np.unique(e, axis=0, return_counts=True)
+        rim = ue[cnt == 1]  # the edges of one triangle only
+        r0, r1 = v[rim[:, 0]], v[rim[:, 1]]
     out = np.empty(len(p))
     chunk = max(1, 2_000_000 // max(len(f), 1))
     for s in range(0, len(p), chunk):
@@ -493,6 +500,13 @@ def _sd_mesh(p: np.ndarray, v: np.ndarray, f: np.ndarray, closed: bool) -> np.nd
         else:
             qn = q[:, 0, :] - cp[np.arange(len(near)), near]
             inside = np.einsum("ij,ij->i", qn, normal[near]) < 0.0
+            if len(rim):
+                # the distance to the open boundary's edges: as near as the surface's, the
+                # nearest point is on the boundary
+                t = np.einsum("nki,ki->nk", q - r0[None], r1 - r0) / np.maximum(np.einsum("ki,ki->k", r1 - r0, r1 - r0), 1e-300)
+                ps = r0[None] + np.clip(t, 0.0, 1.0)[..., None] * (r1 - r0)[None]
+                drim = np.sqrt(np.min(np.einsum("nki,nki->nk", q - ps, q - ps), axis=1))
+                inside &= drim > dist * (1.0 + 1e-9) + 1e-12 * (1.0 + dist)
         out[s:s + chunk] = np.where(inside, -dist, dist)
     return out
 
@@ -512,11 +526,12 @@ def signed_distance(body: Body, points) -> np.ndarray:
     if body.shape == "cylinder":
         d = np.column_stack([np.linalg.norm(q[:, :2], axis=1) - body.radius, np.abs(q[:, 2]) - 0.5 * body.height])
         return np.linalg.norm(np.maximum(d, 0.0), axis=1) + np.minimum(d.max(axis=1), 0.0)
-    # plane: a rectangle in local z = 0, its inside behind it (local z < 0)
+    # plane: a rectangle in local z = 0, its inside behind it (local z < 0) and within its
+    # edges (a thin wall's layers do not wrap round them)
     h = body.half
     dxy = np.maximum(np.abs(q[:, :2]) - h[:2], 0.0)
     dist = np.sqrt(np.sum(dxy ** 2, axis=1) + q[:, 2] ** 2)
-    return np.where(q[:, 2] < 0.0, -dist, dist)
+    return np.where((q[:, 2] < 0.0) & np.all(dxy == 0.0, axis=1), -dist, dist)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -164,8 +164,14 @@ def test_open_mesh_only_as_a_thin_wall(tmp_path):
     b = body(shape="mesh", file=f, open=True)
     assert not b.closed
     # its inside is behind its faces (normal +z): below
-    sd = g.signed_distance(b, [[0.5, 0.5, 0.1], [0.5, 0.5, -0.1]])
-    assert np.allclose(sd, [0.1, -0.1])
+    sd = g.signed_distance(b, [[0.5, 0.5, 0.1], [0.5, 0.5, -0.1], [1.1, 0.5, -0.1]])
+    assert np.allclose(sd, [0.1, -0.1, math.hypot(0.1, 0.1)])  # not behind it past its edge
+    # its layers are the plane primitive's: a slab behind the sheet, not wrapping its edges
+    plane = body(shape="plane", size=[1, 1, 0], position=[0.5, 0.5, 0])
+    assert np.allclose(g.signed_distance(plane, [[1.1, 0.5, -0.1]]), math.hypot(0.1, 0.1))
+    cells = lambda p: {tuple(c) for c in np.rint(p / 0.1 - 0.5).astype(int)}
+    got = g.sample_boundary(b, 0.1, 2)
+    assert cells(got) == cells(g.sample_boundary(plane, 0.1, 2)) and len(got) == 200
     kind = SceneKind("t", "", {}, arrays={"bodies": g.body_keys(3)})
     with pytest.raises(SceneError) as e:
         g.check_bodies({"bodies": _check_array("bodies", [{"shape": "mesh", "file": f, "open": True}], kind)}, 3,

@@ -226,3 +226,27 @@ def test_cuda_matches_cpu_with_bodies():
 
     np.testing.assert_allclose(by_id(gpu, "position"), by_id(cpu, "position"), rtol=0, atol=1e-3 * cpu.info["spacing"])
     np.testing.assert_allclose(by_id(gpu, "density"), by_id(cpu, "density"), rtol=1e-4)
+
+
+def test_a_plane_is_a_thin_wall_with_its_layers_behind_it():
+    # a baffle across the fluid block at x = 0.25, its normal turned from +z to -x: its layers
+    # lie behind it (x > 0.25), and no fluid within half a spacing in front or in the layers
+    baffle = {"name": "baffle", "shape": "plane", "size": [0.3, 0.6, 0.0], "position": [0.25, 0.5, 0.15],
+              "rotation": [0, -90, 0]}
+    sim = Simulation(load_scene("fluid-box").with_overrides({"fluid.particles": 4000, "bodies": [baffle]}), "serial")
+    dp, layers = sim.info["spacing"], sim.info["layers"]
+    b = placed([baffle], 3)[0]
+    assert np.allclose(b.rotation @ [0, 0, 1], [-1, 0, 0])
+    walls = np.asarray(sim.core.download("wall_position"), dtype=np.float64)
+    body = geometry.sample_boundary(b, dp, layers)
+    assert len(body) == sim.info["n_body_particles"]
+    cells = lambda p: {tuple(c) for c in np.rint(p / dp - 0.5).astype(int)}
+    assert cells(body) <= cells(walls)  # (the walls come back in the sorted order)
+    assert np.all(body[:, 0] > 0.25) and np.all(body[:, 0] < 0.25 + layers * dp)
+    # a rectangle of lattice points, layers deep
+    inside = lambda x, lo, hi: np.sum(((np.arange(200) + 0.5) * dp >= lo) & ((np.arange(200) + 0.5) * dp <= hi))
+    assert len(body) == layers * inside(0, 0.2, 0.8) * inside(0, 0.0, 0.3)
+    pos = np.asarray(sim.core.download("position"), dtype=np.float64)
+    sd = geometry.signed_distance(b, pos)
+    assert not np.any((sd < 0.5 * dp) & (sd > -(layers + 0.5) * dp))
+    assert np.any(pos[:, 0] > 0.25 + layers * dp)  # the fluid behind the baffle's layers stays
