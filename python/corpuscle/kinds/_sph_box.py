@@ -28,6 +28,7 @@ import numpy as np
 
 from ..schema import INT64_MAX, CrossCheck, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
+from ._sph_bodies import MAX_BODIES, body_keys, build_bodies, check_bodies, header_obstacles
 
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
 VISCOSITIES = {"artificial": 0, "laminar": 1}
@@ -189,8 +190,14 @@ class SphBox(Kind):
         hs = smoothing * dp
         h = 2.0 * hs
         layers = int(math.ceil(h / dp - 1e-6))
-        nf_est = int(np.prod(f1 - f0))
-        box_cells = np.prod(nb + 2 * layers) - np.prod(nb)
+        # [[bodies]]: their boundary particles join the walls; no fluid inside them (_sph_bodies.py)
+        fluid_pts = lattice(f0, f1, dp)
+        bodies, body_pts, _, clear = build_bodies(scene.arrays, D, dp, layers, fluid_pts)
+        fluid_pts = fluid_pts[clear]
+        nf_est = len(fluid_pts)
+        if nf_est == 0:
+            raise SceneError("bodies: the bodies fill the whole fluid block (no fluid is left)")
+        box_cells = np.prod(nb + 2 * layers) - np.prod(nb) + len(body_pts)
         if nf_est + box_cells > 2**31 - 1:
             raise SceneError(f"{key_values(scene, ('fluid.particles', 'fluid.spacing'))}: "
                              f"{nf_est + box_cells} particles, more than 2^31 - 1")
@@ -233,12 +240,12 @@ class SphBox(Kind):
         # the walls: every lattice point of the box widened by `layers` that is not inside it
         pts = lattice(-layers * np.ones(D, dtype=np.int64), nb + layers, dp)
         inside = np.all((pts > 0.0) & (pts < box_hi), axis=1)
-        wall = pts[~inside]
+        wall = np.concatenate([pts[~inside], body_pts]) if len(body_pts) else pts[~inside]
         top = float(f1[-1] * dp)
         near = np.all((wall[:, :-1] > (f0[:-1] - layers) * dp) & (wall[:, :-1] < (f1[:-1] + layers) * dp), axis=1)
         wall_rho = np.where(near, hydrostatic_density(top - wall[:, -1], rho0, B, gamma, g), rho0)
         if checkpoint is None:
-            pos = lattice(f0, f1, dp)
+            pos = fluid_pts
             vel = np.zeros_like(pos)
             rho = hydrostatic_density(top - pos[:, -1], rho0, B, gamma, g)
         else:
@@ -260,7 +267,8 @@ class SphBox(Kind):
                 "gamma": gamma, "gravity": g, "layers": layers, "box": box_hi.copy(), "fluid_height": height,
                 "fluid_lo": f0 * dp, "fluid_hi": f1 * dp, "n_fluid": nf_est, "n_wall": int(box_cells),
                 "probe_names": [str(p["name"]) for p in scene.arrays.get("probes", [])],
-                "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D)}
+                "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D),
+                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies)}
         info.update(self.extra_info(v, info))
         return Build(params, arrays, info)
 
@@ -348,7 +356,7 @@ class SphBox(Kind):
     def header(self, sim) -> dict[str, Any]:
         p = sim.params
         return {"container": {"type": "box", "min": list(p["box_lo"]), "max": list(p["box_hi"])},
-                "obstacles": [], "bodies": [], "particles": sim.info["n_fluid"], "wall_particles": sim.info["n_wall"],
+                "obstacles": list(sim.info.get("obstacles", [])), "bodies": [], "particles": sim.info["n_fluid"], "wall_particles": sim.info["n_wall"],
                 "spacing": sim.info["spacing"], "h": sim.info["h"], "particle_radius": 0.5 * sim.info["spacing"],
                 "probes": {n: sim.info["probe_positions"][k].tolist() for k, n in enumerate(sim.info["probe_names"])},
                 "units": dict(self.units)}
@@ -401,9 +409,11 @@ def _finite(x) -> bool:
 def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int, checks=(), *,
                 box: Callable[[dict[str, Any]], Any]) -> SceneKind:
     """The kind's schema; ``box(values)`` is the tank's inner size (what probes must lie in)."""
-    return SceneKind(name=name, description=description, keys=keys, arrays={"probes": probe_keys(dim)},
-                     required_in_arrays={"probes": ("name", "position")},
-                     max_in_arrays={"probes": 64},  # kMaxProbes of scenes/sph/model.h
+    return SceneKind(name=name, description=description, keys=keys,
+                     arrays={"probes": probe_keys(dim), "bodies": body_keys(dim)},
+                     required_in_arrays={"probes": ("name", "position"), "bodies": ("shape",)},
+                     max_in_arrays={"probes": 64,  # kMaxProbes of scenes/sph/model.h
+                                    "bodies": MAX_BODIES},
                      checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_lanes, *checks,
-                             _probes_inside(box)])
+                             _probes_inside(box), check_bodies(box, dim)])
 
