@@ -60,6 +60,9 @@ def add_arguments(parser) -> None:
                         "twice as fine; the 3-D a/dp = 40 run is for a GPU: about half an hour on 2 CPU cores)")
     parser.add_argument("--plot", metavar="FILE.png", default="dam-break-front.png",
                         help="where the front plot goes (default: dam-break-front.png; 'none': no plot)")
+    from .impact import add_reference_arguments
+
+    add_reference_arguments(parser)  # --reference lobovsky|buchner: wall pressure (validation/impact.py)
 
 
 def _run(dim: int, particles: int, args) -> dict:
@@ -89,6 +92,10 @@ def _run(dim: int, particles: int, args) -> dict:
 
 
 def run(args) -> list[Check]:
+    if getattr(args, "reference", "martin-moyce") != "martin-moyce":
+        from . import impact
+
+        return impact.run(args)
     n = positive_int("--particles", args.particles)
     if args.plot and args.plot != "none":  # (before the runs: a bad path is not found after them)
         from .._viz_common import check_file_output
