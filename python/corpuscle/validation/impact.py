@@ -139,8 +139,10 @@ def run_case(ref: str, dim: int, resolution: int, sound_factor: float | None, ar
     from ..simulation import Simulation
 
     H, sensors = REFERENCES[ref]
-    L = TANK_LENGTH * H
     dp = H / resolution
+    # the tank as built: the SPH box rounds its extents to whole spacings (kinds/_sph_box.py),
+    # and the sensors sit on the wall it has
+    L = float(np.rint(TANK_LENGTH * H / dp)) * dp
     probes = []
     for k, (label, z, _) in enumerate(sensors):
         pos = [L, z * H] if dim == 2 else [L, 0.25 * H, z * H]
