@@ -5,11 +5,16 @@
 // back, the others broadcast).
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/vector.h>
 
+#include <cmath>
 #include <cstddef>
+#include <stdexcept>
+#include <vector>
 
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/tait.h"
+#include "corpuscle/scenes/sph/probe.h"
 
 namespace nb = nanobind;
 using namespace cps;
@@ -68,4 +73,33 @@ void bind_physics(nb::module_& m) {
        [](double k, double e, double m_eff) { return damping_from_restitution(k, e, m_eff); }, "k", "e", "m_eff",
        "The damping c that gives restitution e (0 < e <= 1) with stiffness k and reduced mass m_eff "
        "(physics/dem.h, in double).");
+  // the SPH box probe's sample points (scenes/sph/probe.h, the float the core samples at)
+  m.def(
+      "probe_samples",
+      [](std::vector<double> center, std::vector<double> normal, int shape, double size, int samples) {
+        const size_t D = center.size();
+        if ((D != 2 && D != 3) || normal.size() != D) throw std::invalid_argument("center and normal: 2 or 3 numbers each");
+        if (shape < 0 || shape > 2 || samples < 1) throw std::invalid_argument("shape 0, 1 or 2 and samples >= 1");
+        double n2 = 0.0;
+        for (double x : normal) n2 += x * x;
+        if (!(n2 > 0.0)) throw std::invalid_argument("normal must be non-zero");
+        float c[3] = {0, 0, 0}, n[3] = {0, 0, 0};
+        for (size_t k = 0; k < D; ++k) {
+          c[k] = float(center[k]);
+          n[k] = float(normal[k] / std::sqrt(n2));
+        }
+        const int ns = shape == cps::sph::kProbePoint ? 1 : samples;
+        auto* out = new double[size_t(ns) * D];
+        for (int s = 0; s < ns; ++s) {
+          float x[3];
+          if (D == 2) cps::sph::probe_sample_point<2>(c, n, shape, float(size), ns, s, x);
+          else cps::sph::probe_sample_point<3>(c, n, shape, float(size), ns, s, x);
+          for (size_t k = 0; k < D; ++k) out[size_t(s) * D + k] = x[k];
+        }
+        nb::capsule owner(out, [](void* q) noexcept { delete[] static_cast<double*>(q); });
+        return nb::ndarray<nb::numpy, double, nb::ndim<2>>(out, {size_t(ns), D}, owner);
+      },
+      nb::arg("center"), nb::arg("normal"), nb::arg("shape"), nb::arg("size"), nb::arg("samples"),
+      "The sample points (samples x dim, float64 of the core's float32) of a probe: shape 0 point, 1 disc, 2 square "
+      "(scenes/sph/probe.h).");
 }

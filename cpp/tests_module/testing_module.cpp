@@ -17,6 +17,7 @@
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/polygon.h"
 #include "corpuscle/physics/polygon_grid.h"
+#include "corpuscle/spatial/lbvh.h"
 #include "cpu/exec_cpu.h"
 #include "testing_ops.h"
 
@@ -276,6 +277,46 @@ NB_MODULE(_testing, m) {
         return np(out, size_t(dim));
       },
       nb::arg("codes"), nb::arg("dim"), nb::arg("wide"));
+  // ---- the LBVH walk over a given hierarchy ----
+  m.def(
+      "lbvh_walk",
+      [](const Array& pos, const Array& left, const Array& right, const Array& rightmost, const Array& boxes,
+         const Array& qlo, const Array& qhi, int stack_depth, bool after) {
+        // the walk of spatial/lbvh.h (LbvhView::walk with the CPU's stack, as the backends run
+        // it on the host) over a hierarchy the caller built: n leaves (slots) at pos (n x 2),
+        // n - 1 internal nodes (children >= n - 1 are leaves; boxes: lo x, lo y, hi x, hi y);
+        // query q visits the slots in [qlo[q], qhi[q]] (after: only slots > q, the reflexive
+        // walk). Returns (per query: the visited slots in walk order) and the overflow flag.
+        auto p = vec<float>(pos, "pos");
+        const int n = int(p.size() / 2);
+        auto l = vec<int32_t>(left, "left"), r = vec<int32_t>(right, "right"), rm = vec<int32_t>(rightmost, "rightmost");
+        auto b = vec<float>(boxes, "boxes"), lo = vec<float>(qlo, "qlo"), hi = vec<float>(qhi, "qhi");
+        if (n < 1 || p.size() != size_t(2 * n) || l.size() != size_t(n - 1) || r.size() != size_t(n - 1) ||
+            rm.size() != size_t(n - 1) || b.size() != size_t(4 * (n - 1)) || lo.size() != hi.size() || lo.size() % 2)
+          throw nb::value_error("lbvh_walk: pos n x 2, left/right/rightmost n - 1, boxes (n - 1) x 4, qlo = qhi q x 2");
+        for (int c = 0; c < n - 1; ++c)
+          if (l[c] < 1 || l[c] > 2 * n - 2 || r[c] < 1 || r[c] > 2 * n - 2)
+            throw nb::value_error("lbvh_walk: a child index outside 1 .. 2n - 2");
+        int overflow = 0;
+        LbvhView<2> v{reinterpret_cast<const Vec<2>*>(p.data()), l.data(), r.data(), rm.data(), b.data(), n, 0.0f,
+                      &overflow, 7, stack_depth};
+        nb::list out;
+        const int nq = int(lo.size() / 2);
+        for (int q = 0; q < nq; ++q) {
+          std::vector<int> seen;
+          auto visit = [&](int j) {
+            if (seen.size() < size_t(4 * n)) seen.push_back(j);  // (a loop would repeat: bounded)
+          };
+          if (after) v.query_box_after(q, &lo[2 * q], &hi[2 * q], visit);
+          else v.query_box(&lo[2 * q], &hi[2 * q], visit);
+          out.append(np(seen));
+        }
+        return nb::make_tuple(out, overflow);
+      },
+      nb::arg("pos"), nb::arg("left"), nb::arg("right"), nb::arg("rightmost"), nb::arg("boxes"), nb::arg("qlo"),
+      nb::arg("qhi"), nb::arg("stack_depth"), nb::arg("after") = false);
+  m.def("lbvh_stack_sizes", []() { return nb::make_tuple(kLbvhStack, kLbvhMaxStack); });
+
   m.def("morton_max_bits", [](int dim, bool wide) {
     if (wide) return dim == 3 ? morton_max_bits64<3>() : morton_max_bits64<2>();
     return dim == 3 ? morton_max_bits<3>() : morton_max_bits<2>();

@@ -294,7 +294,37 @@ class Simulation:
         no-ops that cost (almost) nothing and are not counted. Ctrl-C stops it after a whole
         step (KeyboardInterrupt)."""
         n = _count("steps", n)
-        return int(self.core.step(n))
+        # a kind whose core keeps series in fixed-capacity rings (the SPH box's probes) has
+        # them drained at least every `cap` steps: one read of the record per call, never per step
+        every = getattr(self.kind, "steps_between_drains", None)
+        cap = every(self) if every is not None else None
+        if not cap:
+            return int(self.core.step(n))
+        taken = 0
+        while taken < n:
+            k = min(cap, n - taken)
+            t = int(self.core.step(k))
+            self.kind.drain(self)
+            taken += t
+            if t < k:
+                break
+        return taken
+
+    def probe_series(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """A probe's series (the SPH box kinds' [[probes]]): times (s) and pressures (Pa) of
+        every sample it took (its `interval`; every step by default) of the states the steps
+        started from."""
+        if not hasattr(self.kind, "probe_series"):
+            raise ValueError(f"{self.kind.name} has no probes")
+        return self.kind.probe_series(self, name)
+
+    def probe_impulse(self, name: str, t0: float, t1: float) -> float:
+        """The pressure impulse of a probe over [t0, t1] (Pa s): the trapezoid rule over its
+        series, interpolated at the window's ends."""
+        from .kinds._sph_box import pressure_impulse
+
+        t, p = self.probe_series(name)
+        return pressure_impulse(t, p, float(t0), float(t1))
 
     def run(self, until: float | None = None, steps: int | None = None, chunk: int = 100,
             callback=None) -> None:

@@ -274,7 +274,7 @@ def test_validate_json_is_the_checks_alone():
     proc = corpuscle("validate", "dam-break", "--backend", "cpu", "--plot", "none", "--json", timeout=300)
     assert proc.returncode == 0, proc.stderr
     checks = json.loads(proc.stdout)
-    assert len(checks) == 14 and all(c["passed"] for c in checks)
+    assert len(checks) == 15 and all(c["passed"] for c in checks)  # 13 fronts, the balance, outside
     assert "surge front" in proc.stderr
 
 

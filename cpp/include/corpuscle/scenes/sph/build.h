@@ -1,6 +1,7 @@
 // The SPH box built from its parameters (SI values, as python/corpuscle/kinds/sph_box.py
 // writes them) and made on an Exec with an index plug-in.
 #pragma once
+#include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
@@ -20,6 +21,52 @@ inline Vec<D> vecd(const ParamSource& p, const std::string& key, const char* kin
   Vec<D> r;
   for (int k = 0; k < D; ++k) r[k] = float(v[k]);
   return r;
+}
+
+// the probes' faces and sampling (probe.h) from probe_shape, probe_size, probe_normal (D
+// numbers each), probe_samples and probe_interval, one entry per probe; absent: points sampled
+// every step (what a scene without face probes writes)
+template <int D>
+inline void build_probe_faces(Model<D>& m, const ParamSource& p, const char* kind) {
+  const std::string k(kind);
+  for (int q = 0; q < m.n_probes; ++q) {
+    m.probe_shape[q] = kProbePoint;
+    m.probe_size[q] = 0.0f;
+    m.probe_samples[q] = 1;
+    m.probe_interval[q] = 0.0f;
+    for (int c = 0; c < D; ++c) m.probe_normal[q * D + c] = c == 0 ? 1.0f : 0.0f;
+  }
+  if (!p.has("probe_shape")) return;
+  const auto shape = p.numbers("probe_shape"), size = p.numbers("probe_size"), normal = p.numbers("probe_normal"),
+             samples = p.numbers("probe_samples"), interval = p.numbers("probe_interval");
+  const size_t n = size_t(m.n_probes);
+  if (shape.size() != n || size.size() != n || samples.size() != n || interval.size() != n || normal.size() != n * D)
+    throw Error(k + ": probe_shape, probe_size, probe_samples, probe_interval need one number per probe and "
+                    "probe_normal " + std::to_string(D) + " per probe");
+  for (int q = 0; q < m.n_probes; ++q) {
+    const int sh = int(shape[q]), ns = int(samples[q]);
+    if (sh != kProbePoint && sh != kProbeDisc && sh != kProbeSquare)
+      throw Error(k + ": probe_shape must be 0 (point), 1 (disc) or 2 (square), got " + std::to_string(shape[q]));
+    if (ns < 1 || ns > kMaxProbeSamples || (sh == kProbePoint && ns != 1))
+      throw Error(k + ": probe_samples must be 1 to " + std::to_string(kMaxProbeSamples) + " (a point: 1), got " +
+                  std::to_string(samples[q]));
+    if (D == 3 && sh == kProbeSquare) {
+      const int r = int(std::sqrt(double(ns)) + 0.5);
+      if (r * r != ns) throw Error(k + ": a square probe's probe_samples must be a square number, got " + std::to_string(ns));
+    }
+    if (!(size[q] >= 0.0) || !finite(float(size[q])) || (sh != kProbePoint && !(size[q] > 0.0)))
+      throw Error(k + ": probe_size must be positive and finite, got " + std::to_string(size[q]));
+    if (!(interval[q] >= 0.0) || !finite(float(interval[q])))
+      throw Error(k + ": probe_interval must be >= 0 and finite, got " + std::to_string(interval[q]));
+    double n2 = 0.0;
+    for (int c = 0; c < D; ++c) n2 += normal[q * D + c] * normal[q * D + c];
+    if (!(n2 > 0.0) || !std::isfinite(n2)) throw Error(k + ": probe_normal must be a non-zero finite vector");
+    for (int c = 0; c < D; ++c) m.probe_normal[q * D + c] = float(normal[q * D + c] / std::sqrt(n2));
+    m.probe_shape[q] = sh;
+    m.probe_size[q] = float(size[q]);
+    m.probe_samples[q] = ns;
+    m.probe_interval[q] = float(interval[q]);
+  }
 }
 
 template <class KindT>
@@ -87,6 +134,7 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   if (m.n_probes > kMaxProbes)
     throw Error(std::string(kind) + ": " + std::to_string(m.n_probes) + " probes, at most " + std::to_string(kMaxProbes));
   for (size_t k = 0; k < probes.size(); ++k) m.probes[k] = float(probes[k]);
+  build_probe_faces(m, p, kind);
   return m;
 }
 

@@ -30,6 +30,7 @@
 namespace cps::sph {
 
 constexpr int kMaxProbes = 64;  // probe points per scene
+constexpr int kProbeSeries = 32;  // samples per probe the record holds between drains (probe.h)
 constexpr int kTagFluid = 0, kTagWall = 1;
 
 // time integration
@@ -81,6 +82,14 @@ struct Model {
     for (int c = 0; c < D; ++c) x[c] = probes[k * D + c];
     return x;
   }
+  // the probes' faces and sampling (probe.h): shape (kProbePoint, kProbeDisc, kProbeSquare),
+  // size (m: the disc's diameter, the square's side), unit normal, sample points, interval (s;
+  // 0: every step)
+  int probe_shape[kMaxProbes];
+  float probe_size[kMaxProbes];
+  float probe_normal[kMaxProbes * D];
+  int probe_samples[kMaxProbes];
+  float probe_interval[kMaxProbes];
 };
 
 // Tait's equation of state (physics/tait.h): p = B ((rho / rho0)^gamma - 1)
@@ -154,6 +163,13 @@ struct Scene {
   float probe_p[kMaxProbes];
   float probe_v[kMaxProbes * 3];
   float probe_w[kMaxProbes];
+  // the probes' series (probe.h): each probe's samples in a ring of kProbeSeries (slot
+  // series_n % kProbeSeries), series_n the samples taken so far, series_next the time the
+  // next one is due; the host drains the ring at least every kProbeSeries steps
+  long long series_n[kMaxProbes];
+  double series_next[kMaxProbes];
+  double series_t[kMaxProbes * kProbeSeries];
+  float series_p[kMaxProbes * kProbeSeries];
 };
 
 // what the pair loop reads of a neighbour j besides its position, packed for one vector load

@@ -274,6 +274,8 @@ class Pipeline {
     if (integrate) {
       // 4. the reductions and the per-scene update
       ex_.reduce_then(s.items, n_, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage<D>{md, g, kLists});
+      // the probes' series: a taken step appends each due probe's reading (probe.h)
+      if (m_.n_probes > 0) ex_.for_each(1, ProbeSeriesStage<D>{md, g});
       ex_.mark(3);
       // 5. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n_, IntegrateStage<D>{md, g, s, nf_});

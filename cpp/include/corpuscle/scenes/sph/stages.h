@@ -4,6 +4,7 @@
 #pragma once
 #include "corpuscle/core/atomics.h"
 #include "corpuscle/core/lanes.h"
+#include "corpuscle/scenes/sph/probe.h"
 #include "corpuscle/scenes/sph/tables.h"
 
 namespace cps::sph {
@@ -282,10 +283,10 @@ struct ListGatherLanesFn {
 #endif
 };
 
-// stage 3 (one thread per probe): pressure and velocity at the probe points by kernel
-// interpolation over the fluid with Shepard's normalisation,
-//   f(x) = sum_j f_j W(x - x_j) V_j / sum_j W(x - x_j) V_j,  V_j = m_j / rho_j
-// (DualSPHysics's MeasureTool); no fluid within the support: 0 (probe_w = 0 says so)
+// stage 3 (one thread per probe): pressure and velocity of each probe (probe.h's
+// probe_reading: Shepard's kernel interpolation over the fluid at the point, or averaged over
+// the face's sample points; DualSPHysics's MeasureTool); no fluid within the support: 0
+// (probe_w = 0 says so)
 template <int D, class View>
 struct ProbeStage {
   const Model<D>* model;
@@ -294,22 +295,11 @@ struct ProbeStage {
   View view;  // over the sorted positions
   int nf;
   CPS_HD void operator()(int k) const {
-    const Model<D>& m = *model;
-    const SphKernel<D> w = m.kernels.density;
-    const Vec<D> x = m.probe(k);
-    float sw = 0.0f, sp = 0.0f;
-    Vec<D> sv = Vec<D>::zero();
-    view.gather(-1, x, [&](int j, const Vec<D>&, float r2) {
-      if (j >= nf) return;
-      const float wv = w.w_r2(r2) * (m.mass / a.density[j]);
-      sw += wv;
-      sp += a.pressure[j] * wv;
-      sv += a.velocity[j] * wv;
-    });
-    const float inv = sw > 0.0f ? 1.0f / sw : 0.0f;
-    g->probe_w[k] = sw;
-    g->probe_p[k] = sp * inv;
-    for (int c = 0; c < 3; ++c) g->probe_v[3 * k + c] = c < D ? sv[c] * inv : 0.0f;
+    float p, v[3], w;
+    probe_reading(*model, view, a, nf, k, p, v, w);
+    g->probe_w[k] = w;
+    g->probe_p[k] = p;
+    for (int c = 0; c < 3; ++c) g->probe_v[3 * k + c] = v[c];
     if (k == 0) g->probe_time = g->clock.time;
   }
 };

@@ -43,7 +43,10 @@
   X(probe_time, double, 1, probe_time, false)           \
   X(probe_pressure, float, kMaxProbes, probe_p, false)  \
   X(probe_velocity, float, 3 * kMaxProbes, probe_v, false) \
-  X(probe_weight, float, kMaxProbes, probe_w, false)
+  X(probe_weight, float, kMaxProbes, probe_w, false)    \
+  X(probe_series_count, long long, kMaxProbes, series_n, false) \
+  X(probe_series_time, double, kMaxProbes * kProbeSeries, series_t, false) \
+  X(probe_series_pressure, float, kMaxProbes * kProbeSeries, series_p, false)
 
 // X(name, C type, count, member of Control)
 #define CPS_SPH_CONTROLS(X) X(acceleration, float, 3, acc)
