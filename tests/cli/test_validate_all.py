@@ -76,10 +76,29 @@ def test_each_validation_gets_backend_full_and_plot_where_it_takes_them():
     for name in validation.VALIDATIONS:
         _, parser = options_parser(name)
         argv = report.module_argv(name, parser, "serial", True, None)
-        parser.parse_args(argv)  # every option passed is one the validation takes
+        for label, extra in report.variants(name, True):
+            parser.parse_args([*extra, *argv])  # every option passed is one the validation takes
+        assert report.variants(name, False)[0] == ("", [])  # the default run of each is in the default report
         have = report._options(parser)
         assert ("--backend" in argv) == ("--backend" in have)
         assert ("--full" in argv) == ("--full" in have)
+
+
+def test_variants_run_under_their_own_names(monkeypatch, tmp_path):
+    got = []
+
+    def rec(opts):
+        got.append(opts.x)
+        return [validation.within("ok", 0.0, 0.0, 0.0)]
+
+    _fake(monkeypatch, "multi", rec)
+    mod = sys.modules["corpuscle.validation._fake_multi"]
+    mod.add_arguments = lambda p: (p.add_argument("--x", default="a"), p.add_argument("--full", action="store_true"))
+    mod.REPORT_RUNS = [("", [], False), ("bee", ["--x", "b"], True)]
+    assert [r.name for r in report.run_all(["multi"], None, False, None)] == ["multi"]
+    res = report.run_all(["multi"], None, True, None)
+    assert [r.name for r in res] == ["multi", "multi bee"] and got == ["a", "a", "b"]
+    assert res[1].command == "corpuscle validate multi --x b --full"
 
 
 def test_validate_all_cli(tmp_path):

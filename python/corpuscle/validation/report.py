@@ -78,15 +78,25 @@ def _summary(module) -> str:
     return first[:1].upper() + first[1:]
 
 
-def run_one(name: str, backend: str | None, full: bool, plot_dir: Path | None, log=sys.stderr) -> Result:
-    """Run one validation as ``validate all`` does; an error it raises becomes the result's
-    one-line reason (a FAIL), a Ctrl-C stops everything."""
+def variants(name: str, full: bool) -> list[tuple[str, list[str]]]:
+    """The runs ``validate all`` makes of one validation: (label, its own options). A module's
+    ``REPORT_RUNS`` lists (label, options, full only); without it, one run of its defaults."""
+    module = load(name)
+    runs = getattr(module, "REPORT_RUNS", [("", [], False)])
+    return [(label, list(argv)) for label, argv, full_only in runs if full or not full_only]
+
+
+def run_one(name: str, backend: str | None, full: bool, plot_dir: Path | None, log=sys.stderr,
+            extra: list[str] | None = None, label: str = "") -> Result:
+    """Run one validation as ``validate all`` does (with ``extra`` options, named ``name label``);
+    an error it raises becomes the result's one-line reason (a FAIL), a Ctrl-C stops everything."""
     from ..cli.validate import options_parser
 
     module, parser = options_parser(name)
-    argv = module_argv(name, parser, backend, full, plot_dir)
+    tag = f"{name}-{label}" if label else name
+    argv = [*(extra or []), *module_argv(tag, parser, backend, full, plot_dir)]
     command = shlex.join(["corpuscle", "validate", name, *argv])
-    res = Result(name, command, _summary(module))
+    res = Result(f"{name} {label}" if label else name, command, _summary(module))
     print(f"validate all: {name} ({command})", file=log, flush=True)
     t0, started = time.perf_counter(), time.time() - 1.0
     try:
@@ -103,14 +113,15 @@ def run_one(name: str, backend: str | None, full: bool, plot_dir: Path | None, l
         res.error = f"{type(exc).__name__}: {one_line(exc)}"
     res.seconds = time.perf_counter() - t0
     if plot_dir is not None:  # this run's plots (one of an earlier report is older than the run)
-        res.plots = sorted(p for p in plot_dir.glob(f"{name}*.png") if p.is_file() and p.stat().st_mtime >= started)
+        res.plots = sorted(p for p in plot_dir.glob(f"{tag}.png") if p.is_file() and p.stat().st_mtime >= started)
     return res
 
 
 def run_all(names: list[str] | None = None, backend: str | None = None, full: bool = False,
             plot_dir: Path | None = None, log=sys.stderr) -> list[Result]:
-    """Every validation (or those named), in the registry's order."""
-    return [run_one(n, backend, full, plot_dir, log) for n in (names or list(VALIDATIONS))]
+    """Every validation (or those named), in the registry's order, each run its REPORT_RUNS make."""
+    return [run_one(n, backend, full, plot_dir, log, argv, label)
+            for n in (names or list(VALIDATIONS)) for label, argv in variants(n, full)]
 
 
 def environment(backend: str | None) -> dict[str, str]:
