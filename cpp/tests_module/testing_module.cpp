@@ -559,6 +559,38 @@ NB_MODULE(_testing, m) {
       "(float32 (k, 3)) against the closed mesh (vertices float64 (n, 3), faces int64 (m, 3), outward winding); "
       "its triangle records too. A mesh that is not closed and consistently wound is a ValueError.");
   m.def(
+      "mesh_tree_sdf",
+      [](const std::string& backend, const Array& vertices, const Array& faces, const Array& points, float reach,
+         bool exact) {
+        if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw nb::value_error("vertices must have shape (n, 3)");
+        if (faces.ndim() != 2 || faces.shape(1) != 3) throw nb::value_error("faces must have shape (m, 3)");
+        if (points.ndim() != 2 || points.shape(1) != 3) throw nb::value_error("points must have shape (k, 3)");
+        std::vector<double> V = vec<double>(vertices, "vertices");
+        std::vector<int64_t> F = vec<int64_t>(faces, "faces");
+        std::vector<float> rec;
+        std::string bad = write_triangle_records(V.data(), int64_t(V.size() / 3), F.data(), int64_t(F.size() / 3), rec);
+        if (!bad.empty()) throw nb::value_error(bad.c_str());
+        std::vector<float> box = {3e38f, 3e38f, 3e38f, -3e38f, -3e38f, -3e38f};
+        for (size_t i = 0; i < V.size(); ++i) {
+          box[i % 3] = std::min(box[i % 3], float(V[i]));
+          box[3 + i % 3] = std::max(box[3 + i % 3], float(V[i]));
+        }
+        MeshQuery r = spatial_ops(backend)->mesh_tree(rec, int(F.size() / 3), box, vec<float>(points, "points"), reach,
+                                                      exact);
+        nb::dict d;
+        d["distance"] = np(r.distance);
+        d["normal"] = np(r.normal, 3);
+        d["closest"] = np(r.closest, 3);
+        d["triangle"] = np(r.triangle);
+        d["feature"] = np(r.feature);
+        d["overflow"] = r.overflow;
+        return d;
+      },
+      nb::arg("backend"), nb::arg("vertices"), nb::arg("faces"), nb::arg("points"), nb::arg("reach"),
+      nb::arg("exact") = true,
+      "mesh_sdf through the triangle LBVH (physics/mesh_body.h) on a backend: exact (nearest) or within the cube "
+      "of half-size reach (near; triangle -1 where none overlaps it).");
+  m.def(
       "polygon_grid_sdf",
       [](const Array& vertices, const Array& points, float reach, int resolution) {
         std::vector<float> xy = points2(vertices, "vertices"), p = points2(points, "points");

@@ -101,22 +101,10 @@ struct MeshHit {
   int feature;     // TriFeature
 };
 
-// the nearest point over triangles ids[0, count) (null: 0 .. count - 1), ties to the lowest
-// position in the list; sign and normal from its feature as the header says
-CPS_HD CPS_INLINE MeshHit mesh_sdf_over(const MeshTriangles& M, const Vec3& p, const int* ids, int count) {
-  float best = 3.0e38f;
-  int bi = -1;
-  TriClosest bq{p, kTriFace};
-  for (int k = 0; k < count; ++k) {
-    const int i = ids ? ids[k] : k;
-    const TriClosest c = closest_point_on_triangle(p, M.corner(i, 0), M.corner(i, 1), M.corner(i, 2));
-    const float d2 = norm2(p - c.q);
-    if (d2 < best) {
-      best = d2;
-      bi = i;
-      bq = c;
-    }
-  }
+// the hit of p whose nearest triangle is bi (-1: none) at closest point bq, squared distance
+// best2: the sign and normal from bq's feature as the header says
+CPS_HD CPS_INLINE MeshHit mesh_hit_of(const MeshTriangles& M, const Vec3& p, int bi, const TriClosest& bq,
+                                      float best2) {
   MeshHit h;
   h.triangle = bi;
   h.feature = bq.feature;
@@ -128,7 +116,7 @@ CPS_HD CPS_INLINE MeshHit mesh_sdf_over(const MeshTriangles& M, const Vec3& p, c
   }
   const Vec3 N = M.pseudo_normal(bi, bq.feature);
   const Vec3 d = p - bq.q;
-  const float dist = fsqrt(best);
+  const float dist = fsqrt(best2);
   const bool inside = dot(d, N) < 0.0f;
   h.distance = inside ? -dist : dist;
   // the scale of the coordinates: below 1e-6 of it a distance is float noise
@@ -141,6 +129,33 @@ CPS_HD CPS_INLINE MeshHit mesh_sdf_over(const MeshTriangles& M, const Vec3& p, c
     h.normal = l > 0.0f ? N * (1.0f / l) : M.pseudo_normal(bi, kTriFace);
   }
   return h;
+}
+
+// the running nearest triangle of a search: offer(i) keeps triangle i when it is strictly nearer
+struct MeshNearest {
+  const MeshTriangles* M;
+  Vec3 p;
+  float best2 = 3.0e38f;
+  int bi = -1;
+  TriClosest bq{};
+  CPS_HD CPS_INLINE void offer(int i) {
+    const TriClosest c = closest_point_on_triangle(p, M->corner(i, 0), M->corner(i, 1), M->corner(i, 2));
+    const float d2 = norm2(p - c.q);
+    if (d2 < best2) {
+      best2 = d2;
+      bi = i;
+      bq = c;
+    }
+  }
+  CPS_HD CPS_INLINE MeshHit hit() const { return mesh_hit_of(*M, p, bi, bq, best2); }
+};
+
+// the nearest point over triangles ids[0, count) (null: 0 .. count - 1), ties to the lowest
+// position in the list; sign and normal from its feature as the header says
+CPS_HD CPS_INLINE MeshHit mesh_sdf_over(const MeshTriangles& M, const Vec3& p, const int* ids, int count) {
+  MeshNearest s{&M, p};
+  for (int k = 0; k < count; ++k) s.offer(ids ? ids[k] : k);
+  return s.hit();
 }
 
 // over every triangle (a reference and small meshes)
