@@ -622,7 +622,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     s.add_argument("--particle-radius", metavar="M", help="particle radius in metres (default: the run's, half the spacing)")
     s.add_argument("--smoothing-length", metavar="RADII",
                    help="kernel smoothing length in particle radii; the support is twice it (default: the run's h / 2)")
-    s.add_argument("--cube-size", metavar="RADII", help="marching-cubes cell size in particle radii (default 0.5)")
+    s.add_argument("--cube-size", metavar="RADII", help="marching-cubes cell size in particle radii (default 1)")
     s.add_argument("--iso-threshold", metavar="X", help="colour-field value of the surface (default 0.6)")
     s.add_argument("--mesh-smoothing", dest="smoothing_iters", metavar="N",
                    help="weighted Laplacian smoothing iterations of the mesh (default 0)")

@@ -12,8 +12,10 @@ metres, the smoothing length and the cube (voxel) size in multiples of the radiu
 Defaults come from the run header (``Simulation.header()``): the radius is the header's
 ``particle_radius`` (half the lattice spacing of the SPH kinds), the smoothing length is half
 the run's kernel support ``h`` (splashsurf's kernel support is twice its smoothing length, so
-the colour field is smoothed over the same support as the run's own density), the cube size half
-a radius (splashsurf's recommendation: 0.5 to 1 radius).
+the colour field is smoothed over the same support as the run's own density), the cube size one
+radius (splashsurf recommends 0.5 to 1 radius; at the SPH kinds' support of 3.46 spacings, about
+1.7 times splashsurf's usual one, one radius still puts two cells in a spacing, and costs about
+a fifth of half a radius: docs/rendering.md has the timings).
 
 One mesh per chosen frame, named with the frame's number: ``surface_00012.obj`` (Wavefront
 OBJ, text), ``.ply`` (binary little-endian PLY) or ``.vtu`` (VTK XML, plus ``<run>_surface.pvd``,
@@ -48,7 +50,7 @@ LIMITS = {
     "cube_size": (0.05, 16.0, "particle radii"),
     "iso_threshold": (0.0, 10.0, ""),
 }
-DEFAULT_CUBE = 0.5  # radii (splashsurf: 0.5 to 1)
+DEFAULT_CUBE = 1.0  # radii (splashsurf: 0.5 to 1; 1 at the SPH kinds' wide support: see docs/rendering.md)
 DEFAULT_ISO = 0.6  # splashsurf's default threshold of the colour field
 MAX_SMOOTHING_ITERS = 10000
 # a frame whose surface would need more marching-cubes cells along one axis than this is refused

@@ -63,7 +63,7 @@ def test_defaults_come_from_the_run_header():
     assert d["particle_radius"] == pytest.approx(DP / 2)
     # splashsurf's support is twice its smoothing length: the run's support 2 hs -> hs, in radii
     assert d["smoothing_length"] * d["particle_radius"] * 2 == pytest.approx(2 * SMOOTHING * DP)
-    assert d["cube_size"] == 0.5 and d["iso_threshold"] == 0.6
+    assert d["cube_size"] == 1.0 and d["iso_threshold"] == 0.6
 
 
 def test_static_block_is_closed_and_has_its_volume(tmp_path):
