@@ -151,8 +151,10 @@ def reconstruct(positions, *, particle_radius: float, smoothing_length: float, c
             pos, particle_radius=r, smoothing_length=hl, cube_size=cube, iso_surface_threshold=iso,
             mesh_smoothing_iters=iters or None, mesh_smoothing_weights=True, decimate_barnacles=bool(decimate),
             compute_normals=bool(normals), sph_normals=bool(normals), mesh_cleanup=bool(decimate))
-    except Exception as exc:  # splashsurf's own refusals (a Rust error raised as an exception)
-        raise error(f"surface reconstruction failed: {' '.join(str(exc).split())}") from None
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:  # splashsurf's refusals, and a Rust panic (pyo3's PanicException is a BaseException)
+        raise error(f"surface reconstruction failed: {' '.join(str(exc).split()) or type(exc).__name__}") from None
     data = result[0] if isinstance(result, tuple) else result
     tri = data.mesh
     v = np.array(tri.vertices, np.float64).reshape(-1, 3)
