@@ -591,6 +591,38 @@ NB_MODULE(_testing, m) {
       "mesh_sdf through the triangle LBVH (physics/mesh_body.h) on a backend: exact (nearest) or within the cube "
       "of half-size reach (near; triangle -1 where none overlaps it).");
   m.def(
+      "mesh_contact",
+      [](const std::string& backend, const Array& vertices, const Array& faces, const Array& x, const Array& v,
+         float radius, float k, float c) {
+        if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw nb::value_error("vertices must have shape (n, 3)");
+        if (faces.ndim() != 2 || faces.shape(1) != 3) throw nb::value_error("faces must have shape (m, 3)");
+        if (x.ndim() != 2 || x.shape(1) != 3 || v.ndim() != 2 || v.shape(1) != 3 || x.shape(0) != v.shape(0))
+          throw nb::value_error("x and v must have the same shape (k, 3)");
+        std::vector<double> V = vec<double>(vertices, "vertices");
+        std::vector<int64_t> F = vec<int64_t>(faces, "faces");
+        std::vector<float> rec;
+        std::string bad = write_triangle_records(V.data(), int64_t(V.size() / 3), F.data(), int64_t(F.size() / 3), rec);
+        if (!bad.empty()) throw nb::value_error(bad.c_str());
+        std::vector<float> box = {3e38f, 3e38f, 3e38f, -3e38f, -3e38f, -3e38f};
+        for (size_t i = 0; i < V.size(); ++i) {
+          box[i % 3] = std::min(box[i % 3], float(V[i]));
+          box[3 + i % 3] = std::max(box[3 + i % 3], float(V[i]));
+        }
+        auto r = spatial_ops(backend)->mesh_contact(rec, int(F.size() / 3), box, vec<float>(x, "x"), vec<float>(v, "v"),
+                                                    radius, k, c);
+        nb::dict d;
+        d["force"] = np(r[0], 3);
+        d["magnitude"] = np(r[1]);
+        d["moved"] = np(r[2]);
+        d["x"] = np(r[3], 3);
+        d["v"] = np(r[4], 3);
+        return d;
+      },
+      nb::arg("backend"), nb::arg("vertices"), nb::arg("faces"), nb::arg("x"), nb::arg("v"), nb::arg("radius"),
+      nb::arg("k"), nb::arg("c"),
+      "physics/mesh_body.h's mesh_contact_force then mesh_keep_out on each particle (float32 (k, 3) x, v) on a "
+      "backend: force on the particle, its magnitude, whether keep_out moved it, and x, v after it.");
+  m.def(
       "polygon_grid_sdf",
       [](const Array& vertices, const Array& points, float reach, int resolution) {
         std::vector<float> xy = points2(vertices, "vertices"), p = points2(points, "points");

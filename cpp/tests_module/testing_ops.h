@@ -99,6 +99,10 @@ struct SpatialOps {
   // records: n triangle records (physics/triangle.h); exact: nearest(), else near()
   virtual MeshQuery mesh_tree(const std::vector<float>& records, int n, const std::vector<float>& box,
                               const std::vector<float>& points, float reach, bool exact) = 0;
+  // mesh_contact_force then mesh_keep_out on each particle: (force, magnitude, moved, x, v)
+  virtual std::vector<std::vector<float>> mesh_contact(const std::vector<float>& records, int n,
+                                                       const std::vector<float>& box, std::vector<float> x,
+                                                       std::vector<float> v, float r, float k, float c) = 0;
   virtual Lists gather(const IndexQuery& q) = 0;
   // each pair (i, j) that pairs() visits, in input numbering, in no particular order
   virtual std::vector<int> pairs(const IndexQuery& q) = 0;
@@ -113,6 +117,27 @@ struct SpatialOps {
 // ---------------------------------------------------------------------------------------
 // functors (CPS_HD: one definition for every backend)
 // ---------------------------------------------------------------------------------------
+// the body's contact and keep-out on each particle (physics/mesh_body.h): force, magnitude,
+// and the moved position and velocity
+struct MeshContactFn {
+  MeshTreeView v;
+  SpringDashpot law;
+  float r;
+  Vec3* x;
+  Vec3* vel;
+  Vec3* f;
+  float* mag;
+  int* moved;
+  CPS_HD void operator()(int i) const {
+    MeshHit h;
+    float m;
+    Vec3 fi;
+    mesh_contact_force(law, v, x[i], vel[i], r, fi, m, h);
+    f[i] = fi;
+    mag[i] = m;
+    moved[i] = mesh_keep_out(v, r, x[i], vel[i]) ? 1 : 0;
+  }
+};
 struct MeshQueryFn {
   MeshTreeView v;
   const Vec3* p;
@@ -515,6 +540,34 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
     r.feature = this->download(feat.data(), size_t(m));
     r.overflow = this->download(mesh.overflow(), 1)[0];
     return r;
+  }
+
+  std::vector<std::vector<float>> mesh_contact(const std::vector<float>& records, int n, const std::vector<float>& box,
+                                               std::vector<float> x, std::vector<float> v, float r, float k,
+                                               float c) override {
+    MeshTree<Exec> mesh(ex, records.data(), n, box.data(), box.data() + 3);
+    const int m = int(x.size() / 3);
+    auto dx = this->template alloc<Vec3>(size_t(m));
+    auto dv = this->template alloc<Vec3>(size_t(m));
+    if (m) {
+      ex.to_device(dx.data(), x.data(), size_t(m) * sizeof(Vec3));
+      ex.to_device(dv.data(), v.data(), size_t(m) * sizeof(Vec3));
+    }
+    auto f = this->template alloc<Vec3>(size_t(m));
+    auto mag = this->template alloc<float>(size_t(m));
+    auto moved = this->template alloc<int>(size_t(m));
+    ex.for_each_shared(m, MeshContactFn{mesh.view(), SpringDashpot{k, c}, r, dx.data(), dv.data(), f.data(), mag.data(),
+                                        moved.data()},
+                       lbvh_stack_bytes(kLbvhStack));
+    auto flat = [&](const Vec3* p) {
+      std::vector<Vec3> h = this->download(p, size_t(m));
+      std::vector<float> out;
+      for (const Vec3& a : h) out.insert(out.end(), {a[0], a[1], a[2]});
+      return out;
+    };
+    std::vector<int> mv = this->download(moved.data(), size_t(m));
+    std::vector<float> mvf(mv.begin(), mv.end());
+    return {flat(f.data()), this->download(mag.data(), size_t(m)), mvf, flat(dx.data()), flat(dv.data())};
   }
 
   Lists gather(const IndexQuery& q) override {

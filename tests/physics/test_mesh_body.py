@@ -71,3 +71,54 @@ def test_contact_query_within_a_reach(backend, mesh):
     # its cube is farther than the reach
     np.testing.assert_allclose(r["distance"][within], ref["distance"][within], atol=2e-6)
     assert np.all(np.abs(ref["distance"][r["triangle"] < 0]) > reach)
+
+
+def test_contact_force_follows_the_law_at_faces_edges_and_corners(backend):
+    if not hasattr(_testing, "mesh_contact"):
+        pytest.skip("corpuscle._testing predates mesh_contact (rebuild it)")
+    v, f = box_mesh()  # the unit cube
+    k, c, r = 5e4, 50.0, 0.05
+    x = f32([[0.5, 0.5, 1.03], [0.5, 0.5, 0.98], [0.5, 0.5, 1.2], [1.02, 0.5, 1.02], [1.02, 1.02, 1.02]])
+    u = f32([[0.3, 0.0, -2.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, -1.0], [0.0, 0.0, 0.0]])
+    out = _testing.mesh_contact(backend, v, f, x, u, r, k, c)
+    F = out["force"]
+    np.testing.assert_allclose(F[0], [0.0, 0.0, k * (r - 0.03) + c * 2.0], rtol=1e-5)  # above a face
+    np.testing.assert_allclose(F[1], [0.0, 0.0, k * (r + 0.02)], rtol=1e-5)  # just inside: out through the top
+    np.testing.assert_array_equal(F[2], [0.0, 0.0, 0.0])  # apart
+    n = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)  # from the edge, along the bisector
+    np.testing.assert_allclose(F[3], (k * (r - 0.02 * np.sqrt(2)) + c * np.sqrt(2)) * n, rtol=1e-4)
+    n = np.ones(3) / np.sqrt(3)  # from the corner
+    np.testing.assert_allclose(F[4], k * (r - 0.02 * np.sqrt(3)) * n, rtol=1e-4)
+    np.testing.assert_allclose(out["magnitude"], np.linalg.norm(F, axis=1), rtol=1e-6)
+    # only the centre inside was moved: back out through the nearest face, its velocity kept
+    # (it was not moving in)
+    np.testing.assert_array_equal(out["moved"], [0, 1, 0, 0, 0])
+    assert 1.0 < out["x"][1, 2] <= 1.0 + 0.05 * r + 1e-6
+    np.testing.assert_allclose(out["x"][1, :2], [0.5, 0.5])
+
+
+@pytest.mark.parametrize("mesh", ["icosphere", "l_prism", "sphere.stl"])
+def test_keep_out_leaves_no_centre_inside(backend, mesh):
+    if not hasattr(_testing, "mesh_contact"):
+        pytest.skip("corpuscle._testing predates mesh_contact (rebuild it)")
+    v, f = MESHES[mesh]()
+    rng = np.random.default_rng(2)
+    lo, hi = v.min(0), v.max(0)
+    size = float((hi - lo).max())
+    x = f32(rng.uniform(lo - 0.1 * size, hi + 0.1 * size, (3000, 3)))
+    u = f32(rng.normal(size=x.shape))
+    r = 0.01 * float((hi - lo).max())
+    ref = _testing.mesh_sdf(v, f, x)
+    before = ref["distance"]
+    out = _testing.mesh_contact(backend, v, f, x, u, r, 1e4, 0.0)
+    inside = before < 0
+    assert inside.sum() > 100
+    np.testing.assert_array_equal(out["moved"].astype(bool), inside)
+    after = _testing.mesh_sdf(v, f, f32(out["x"]))["distance"]
+    assert np.all(after >= 0.0)  # no centre ends inside
+    assert np.all(after[inside] <= 0.05 * r * 2 ** 8 + 1e-6)  # put back on the surface
+    # the velocity's component along the surface normal it left through now points out
+    # (reflected where it pointed in)
+    n = ref["normal"][inside]
+    assert np.all(np.sum(out["v"][inside] * n, axis=1) >= -1e-4)
+    np.testing.assert_array_equal(out["x"][~inside], x[~inside])

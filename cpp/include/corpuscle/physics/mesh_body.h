@@ -15,6 +15,7 @@
 // Karras hierarchy built and fitted bottom-up over the boxes. Triangle numbers in hits are
 // the sorted ones; MeshTree::order() maps them back to the mesh's.
 #pragma once
+#include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/triangle.h"
 #include "corpuscle/spatial/lbvh.h"
 
@@ -90,6 +91,53 @@ struct MeshTreeView {
     return h;
   }
 };
+
+// squared distance from p to the mesh's box (0 inside it): the early-out before any walk
+CPS_HD CPS_INLINE float mesh_box_distance2(const MeshTreeView& M, const Vec3& p) {
+  float d2 = 0.0f;
+  for (int k = 0; k < 3; ++k) {
+    const float e = p[k] < M.lo[k] ? M.lo[k] - p[k] : (p[k] > M.hi[k] ? p[k] - M.hi[k] : 0.0f);
+    d2 += e * e;
+  }
+  return d2;
+}
+
+// A particle (centre x, velocity v, radius r) against the resting mesh body with the body's
+// law (physics/dem.h's wall law along the signed distance's normal: the overlap r - d, d < 0
+// for a centre inside): the force on the particle and its magnitude; hit: the closest feature
+// (the reaction on the body, -f, acts at hit.closest). No contact beyond r of the surface; a
+// centre deeper inside than r is the push-out's (mesh_keep_out)
+CPS_HD CPS_INLINE bool mesh_contact_force(const SpringDashpot& law, const MeshTreeView& M, const Vec3& x,
+                                          const Vec3& v, float r, Vec3& f_on_particle, float& magnitude,
+                                          MeshHit& hit) {
+  f_on_particle = Vec3::zero();
+  magnitude = 0.0f;
+  hit.triangle = -1;
+  if (M.tris.n == 0 || !(mesh_box_distance2(M, x) < r * r)) return false;
+  hit = M.near(x, r);
+  if (hit.triangle < 0) return false;
+  return wall_contact_force<3>(law, hit.distance, hit.normal, v, r, Vec3::zero(), f_on_particle, magnitude);
+}
+
+// no centre ends a step inside the body: one that got in is put back on the surface, a
+// twentieth of a radius outside along the normal (doubling the step until it is outside, as
+// the airfoil's keep_out), its normal velocity reflected; returns whether it moved
+CPS_HD CPS_INLINE bool mesh_keep_out(const MeshTreeView& M, float r, Vec3& x, Vec3& v) {
+  if (M.tris.n == 0 || mesh_box_distance2(M, x) > 0.0f) return false;
+  MeshHit hit = M.nearest(x, r);
+  if (!(hit.distance < 0.0f)) return false;
+  float step = 0.05f * r;
+  Vec3 y = x;
+  for (int k = 0; k < 8; ++k) {
+    y = hit.closest + hit.normal * step;
+    if (!(M.nearest(y, r).distance < 0.0f)) break;
+    step *= 2.0f;
+  }
+  x = y;
+  const float vn = dot(v, hit.normal);
+  if (vn < 0.0f) v -= hit.normal * (2.0f * vn);
+  return true;
+}
 
 // the tree's buffers and its build on an Exec
 template <class Exec>
