@@ -3,7 +3,9 @@
 ``--format vtk`` writes one VTK XML unstructured grid (``.vtu``, raw appended binary) per
 frame and part plus a ``.pvd`` collection that ParaView opens as one time series;
 ``--format vtkhdf`` writes a single VTKHDF file (HDF5; a temporal
-PartitionedDataSetCollection, VTKHDF 2.2, needs ``h5py``).
+PartitionedDataSetCollection, VTKHDF 2.2, needs ``h5py``); ``--format surface`` the fluid's
+surface as a mesh per frame (:mod:`corpuscle.surface`, which also holds its options). The module
+is longer than 600 lines: the frame's parts, the two writers and the command belong together.
 
 Parts of a frame: ``particles`` (the fluid group: points at ``position``, every other fluid
 field as point data), one part per other particle group (``ghost``: points at
@@ -27,6 +29,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from . import surface as _surface
 from ._camera import quat_matrix
 from ._errors import write_failure
 from ._viz_common import (AtomicOutputs, cli_warnings, missing_dirs, open_run, os_reason, parse_frames, prepare_dir,
@@ -525,25 +528,19 @@ def _write_vtkhdf(h5py, sink, run, indices, header, order, schemas, statics, bar
 # ---- entry points ---------------------------------------------------------------------------
 
 
-def export_run(run, out_dir, *, format: str = "vtk", frames=None, progress: bool | None = None,
-               surface: dict | None = None) -> Path:
+def export_run(run, out_dir, *, format="vtk", frames=None, progress: bool | None = None, surface=None) -> Path:
     """Export a recorded run (path or opened Run) into folder ``out_dir``.
 
-    ``format``: ``"vtk"`` (``.vtu`` per frame and part plus ``<run>.pvd``), ``"vtkhdf"``
-    (one ``<run>.vtkhdf``) or ``"surface"`` (a fluid-surface mesh per frame; ``surface``: the
-    keyword arguments of :func:`corpuscle.surface.export_surfaces`: ``mesh``, ``particle_radius``,
-    ...). ``frames``: ``"a:b[:step]"`` or a slice (default all). Returns the file to open in
-    ParaView (surface: the last file written). Raises :class:`ExportError` for bad input.
+    ``format``: ``"vtk"`` (``.vtu`` per frame and part plus ``<run>.pvd``), ``"vtkhdf"`` (one
+    ``<run>.vtkhdf``) or ``"surface"`` (meshes: :mod:`corpuscle.surface`, ``surface`` its keywords).
+    ``frames``: ``"a:b[:step]"`` or a slice (default all). Returns the file to open in ParaView
+    (surface: the last one). Raises :class:`ExportError` for bad input.
     """
     if format not in FORMATS:
         raise ExportError(f"unknown --format '{format}': choose {', '.join(FORMATS)}")
-    if format == "surface":
-        from .surface import export_surfaces
-
-        return export_surfaces(run, out_dir, frames=frames, progress=progress, error=ExportError,
-                               **(surface or {}))[-1]
-    if surface:
-        raise ExportError(f"--{next(iter(surface)).replace('_', '-')} is an option of --format surface only")
+    if format == "surface" or surface:
+        return _surface.export_surfaces(run, out_dir, frames=frames, progress=progress, error=ExportError,
+                                        format=format, **(surface or {}))[-1]
     run = open_run(run, ExportError)
     indices = parse_frames(frames, len(run), ExportError)
     created = missing_dirs(out_dir)
@@ -575,27 +572,9 @@ def run_command(args: argparse.Namespace) -> int:
         return _run_command(args)
 
 
-# surface options: (attribute, the keyword of export_surfaces)
-_SURFACE_OPTIONS = ("mesh", "particle_radius", "smoothing_length", "cube_size", "iso_threshold", "smoothing_iters",
-                    "decimate", "normals")
-
-
 def _run_command(args: argparse.Namespace) -> int:
-    surface = {k: getattr(args, k) for k in _SURFACE_OPTIONS if getattr(args, k, None) not in (None, False)}
-    if args.format == "surface":
-        from .surface import export_surfaces
-
-        paths = export_surfaces(args.run, args.output, frames=args.frames, progress=False if args.quiet else None,
-                                error=ExportError, **surface)
-        if not args.quiet:
-            meshes = [p for p in paths if p.suffix != ".pvd"]
-            print(f"wrote {len(meshes)} surface mesh{'es' if len(meshes) != 1 else ''} into {args.output}"
-                  + (f" ({paths[-1].name} opens them as a series)" if paths[-1].suffix == ".pvd" else ""))
-        return 0
-    if surface:
-        opt = next(iter(surface))
-        raise ExportError(f"--{'mesh-smoothing' if opt == 'smoothing_iters' else opt.replace('_', '-')} "
-                          f"is an option of --format surface only")
+    if (code := _surface.run_surface_command(args, ExportError)) is not None:
+        return code  # --format surface (its options: only there)
     path = export_run(args.run, args.output, format=args.format, frames=args.frames,
                       progress=False if args.quiet else None)
     if not args.quiet:
@@ -605,9 +584,8 @@ def _run_command(args: argparse.Namespace) -> int:
 
 # one-line help and description of the subcommand (for a command table such as corpuscle.cli's)
 HELP = "export a recorded run for ParaView (VTK or VTKHDF) or its fluid surface as meshes"
-DESCRIPTION = ("Export a recorded run as ParaView-readable files: a .vtu per frame and "
-               "part plus a .pvd series (vtk), or one .vtkhdf file (vtkhdf); or the fluid's free surface "
-               "of every chosen frame as a triangle mesh (surface: splashsurf, --mesh obj|ply|vtk).")
+DESCRIPTION = ("Export a recorded run as ParaView-readable files: a .vtu per frame and part plus a .pvd series "
+               "(vtk), one .vtkhdf file (vtkhdf), or the fluid's surface as a mesh per frame (surface).")
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
@@ -617,17 +595,7 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
     p.add_argument("--format", default="vtk", metavar="vtk|vtkhdf|surface", help="vtk (default), vtkhdf or surface")
     p.add_argument("--frames", metavar="A:B[:STEP]", help="frames to export (Python slice; default all)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
-    s = p.add_argument_group("surface (--format surface; splashsurf's parameters, defaults from the run)")
-    s.add_argument("--mesh", metavar="obj|ply|vtk", help="mesh file format (default obj; vtk: .vtu per frame and a .pvd)")
-    s.add_argument("--particle-radius", metavar="M", help="particle radius in metres (default: the run's, half the spacing)")
-    s.add_argument("--smoothing-length", metavar="RADII",
-                   help="kernel smoothing length in particle radii; the support is twice it (default: the run's h / 2)")
-    s.add_argument("--cube-size", metavar="RADII", help="marching-cubes cell size in particle radii (default 1)")
-    s.add_argument("--iso-threshold", metavar="X", help="colour-field value of the surface (default 0.6)")
-    s.add_argument("--mesh-smoothing", dest="smoothing_iters", metavar="N",
-                   help="weighted Laplacian smoothing iterations of the mesh (default 0)")
-    s.add_argument("--decimate", action="store_true", help="remove marching-cubes barnacles (decimation)")
-    s.add_argument("--normals", action="store_true", help="write vertex normals (from the colour field's gradient)")
+    _surface.configure_surface_options(p)  # --mesh, --cube-size, ...
     p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
 
 

@@ -248,14 +248,17 @@ def export_surfaces(run, out_dir, *, mesh: str = "obj", frames=None, particle_ra
                     smoothing_length: float | None = None, cube_size: float | None = None,
                     iso_threshold: float | None = None, smoothing_iters: int = 0, decimate: bool = False,
                     normals: bool = False, progress: bool | None = None, force: bool | None = None,
-                    error: type[ValueError] = SurfaceError) -> list[Path]:
+                    error: type[ValueError] = SurfaceError, format: str = "surface") -> list[Path]:
     """Reconstruct the fluid surface of each chosen frame of a recorded run into ``out_dir``.
 
     ``mesh``: ``"obj"``, ``"ply"`` or ``"vtk"`` (``.vtu`` per frame plus ``<run>_surface.pvd``);
-    ``frames``: ``"a:b[:step]"`` or a slice (default all); the parameters as :func:`reconstruct`'s,
+    ``frames``: ``"a:b[:step]"`` or a slice (default all); the parameters as :func:`reconstruct`'s
+    (``smoothing_iters``: ``--mesh-smoothing``),
     None for the run's defaults (:func:`surface_defaults`). An existing file of another kind is
     replaced only with ``force``. Returns the files written (the .pvd last).
     """
+    if format != "surface":  # export_run(format=..., surface={...}): the options of another format
+        raise error(f"surface options are for format 'surface', not '{format}'")
     if mesh not in MESH_FORMATS:
         raise error(f"unknown --mesh '{mesh}': choose {', '.join(MESH_FORMATS)}")
     run = open_run(run, error)
@@ -339,3 +342,46 @@ def _frame_error(error: type[ValueError], index: int) -> type[ValueError]:
 
     FrameError.__name__ = error.__name__
     return FrameError
+
+
+# ---- the options of `corpuscle export --format surface` ---------------------------------------
+
+# (attribute of the parsed options = the keyword of export_surfaces)
+SURFACE_OPTIONS = ("mesh", "particle_radius", "smoothing_length", "cube_size", "iso_threshold", "smoothing_iters",
+                   "decimate", "normals")
+
+
+def configure_surface_options(p) -> None:
+    """Add the surface options to ``corpuscle export``'s parser."""
+    s = p.add_argument_group("surface (--format surface; splashsurf's parameters, defaults from the run)")
+    s.add_argument("--mesh", metavar="obj|ply|vtk", help="mesh file format (default obj; vtk: .vtu per frame and a .pvd)")
+    s.add_argument("--particle-radius", metavar="M", help="particle radius in metres (default: the run's, half the spacing)")
+    s.add_argument("--smoothing-length", metavar="RADII",
+                   help="kernel smoothing length in particle radii; the support is twice it (default: the run's h / 2)")
+    s.add_argument("--cube-size", metavar="RADII", help="marching-cubes cell size in particle radii (default 1)")
+    s.add_argument("--iso-threshold", metavar="X", help="colour-field value of the surface (default 0.6)")
+    s.add_argument("--mesh-smoothing", dest="smoothing_iters", metavar="N",
+                   help="weighted Laplacian smoothing iterations of the mesh (default 0)")
+    s.add_argument("--decimate", action="store_true", help="remove marching-cubes barnacles (decimation)")
+    s.add_argument("--normals", action="store_true", help="write vertex normals (from the colour field's gradient)")
+
+
+def _option_name(key: str) -> str:
+    return "--mesh-smoothing" if key == "smoothing_iters" else "--" + key.replace("_", "-")
+
+
+def run_surface_command(args, error: type[ValueError]) -> int | None:
+    """``corpuscle export --format surface``: the meshes and one summary line unless quiet (the
+    exit code); None for another format, which refuses the surface options."""
+    surface = {k: getattr(args, k) for k in SURFACE_OPTIONS if getattr(args, k, None) not in (None, False)}
+    if args.format != "surface":
+        if surface:
+            raise error(f"{_option_name(next(iter(surface)))} is an option of --format surface only")
+        return None
+    paths = export_surfaces(args.run, args.output, frames=args.frames, progress=False if args.quiet else None,
+                            error=error, **surface)
+    if not args.quiet:
+        meshes = [p for p in paths if p.suffix != ".pvd"]
+        print(f"wrote {len(meshes)} surface mesh{'es' if len(meshes) != 1 else ''} into {args.output}"
+              + (f" ({paths[-1].name} opens them as a series)" if paths[-1].suffix == ".pvd" else ""))
+    return 0
