@@ -523,9 +523,8 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
     auto q = this->template alloc<Vec3>(size_t(m));
     auto tri = this->template alloc<int>(size_t(m));
     auto feat = this->template alloc<int>(size_t(m));
-    ex.for_each_shared(m, MeshQueryFn{mesh.view(), p.data(), reach, exact ? 1 : 0, dist.data(), nrm.data(), q.data(),
-                                      tri.data(), feat.data()},
-                       lbvh_stack_bytes(kLbvhStack));
+    ex.for_each(m, MeshQueryFn{mesh.view(), p.data(), reach, exact ? 1 : 0, dist.data(), nrm.data(), q.data(),
+                               tri.data(), feat.data()});  // a plain launch: the mesh walk's stack is local
     MeshQuery r;
     r.distance = this->download(dist.data(), size_t(m));
     std::vector<Vec3> nv = this->download(nrm.data(), size_t(m)), qv = this->download(q.data(), size_t(m));
@@ -556,9 +555,8 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
     auto f = this->template alloc<Vec3>(size_t(m));
     auto mag = this->template alloc<float>(size_t(m));
     auto moved = this->template alloc<int>(size_t(m));
-    ex.for_each_shared(m, MeshContactFn{mesh.view(), SpringDashpot{k, c}, r, dx.data(), dv.data(), f.data(), mag.data(),
-                                        moved.data()},
-                       lbvh_stack_bytes(kLbvhStack));
+    ex.for_each(m, MeshContactFn{mesh.view(), SpringDashpot{k, c}, r, dx.data(), dv.data(), f.data(), mag.data(),
+                                 moved.data()});
     auto flat = [&](const Vec3* p) {
       std::vector<Vec3> h = this->download(p, size_t(m));
       std::vector<float> out;

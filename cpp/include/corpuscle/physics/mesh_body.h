@@ -54,6 +54,10 @@ struct TriangleReorderFn {
   }
 };
 
+// traversal stack entries of a mesh query: a query box of a contact reach straddles few splits
+// (a push onto a full stack raises the view's overflow flag: the caller stops the run)
+constexpr int kMeshStack = 32;
+
 // the queries (a plain view: copy it into a functor)
 struct MeshTreeView {
   MeshTriangles tris;  // sorted along the curve
@@ -68,7 +72,11 @@ struct MeshTreeView {
       qlo[k] = p[k] - reach;
       qhi[k] = p[k] + reach;
     }
-    tree.query_box(qlo, qhi, [&](int j) { s.offer(j); });
+    // the walk's stack is a local array on every backend (not the particle tree's shared
+    // memory): the query runs inside any stage, a fused grid pass included, whatever its launch
+    int stack[kMeshStack];
+    auto visit = [&](int j) { s.offer(j); };
+    tree.template walk<false>(LbvhStack{stack, 1, kMeshStack}, -1, qlo, qhi, visit);
     return s.hit();
   }
   // the largest distance from p to the mesh's box: a cube of this half-size holds every triangle
@@ -174,11 +182,12 @@ class MeshTree {
     tree_.build(ex, cen_.data(), box_.data());
     ex.synchronize();
   }
-  // the queries; a traversal that would overflow its stack raises *overflow() to code
-  MeshTreeView view(int code = 1, int depth = kLbvhStack) {
+  // the queries; a traversal that would overflow its stack raises *overflow to code (null: the
+  // tree's own flag, overflow(); a scene passes its clock's bad flag, as the particle tree does)
+  MeshTreeView view(int* overflow = nullptr, int code = 1) {
     MeshTreeView v;
     v.tris = MeshTriangles{rec_.data(), n_};
-    v.tree = tree_.view(cen_.data(), overflow_.data(), code, depth);
+    v.tree = tree_.view(cen_.data(), overflow ? overflow : overflow_.data(), code, kMeshStack);
     v.tree.leaf_boxes = box_.data();
     for (int k = 0; k < 3; ++k) {
       v.lo[k] = lo_[k];
