@@ -18,6 +18,7 @@
 #include "corpuscle/physics/polygon.h"
 #include "corpuscle/physics/polygon_grid.h"
 #include "corpuscle/spatial/lbvh.h"
+#include "corpuscle/physics/triangle_mesh.h"
 #include "cpu/exec_cpu.h"
 #include "testing_ops.h"
 
@@ -535,6 +536,133 @@ NB_MODULE(_testing, m) {
       nb::arg("vertices"), nb::arg("points"), nb::arg("layout") = "vertices",
       "Signed distance (negative inside), outward normal, closest point and feature of each point "
       "(float32 (m, 2)) against the counter-clockwise polygon (float32 (n, 2)).");
+  // ---- triangles and triangle meshes (physics/triangle.h, triangle_mesh.h), host only ----
+  m.def(
+      "triangle_closest",
+      [](const Array& points, const Array& a, const Array& b, const Array& c) {
+        auto rows3 = [](const Array& x, const char* what) {
+          if (x.ndim() != 2 || x.shape(1) != 3) throw nb::value_error((std::string(what) + " must have shape (n, 3)").c_str());
+          return vec<float>(x, what);
+        };
+        std::vector<float> p = rows3(points, "points"), A = rows3(a, "a"), B = rows3(b, "b"), C = rows3(c, "c");
+        size_t m = p.size() / 3;
+        if (A.size() != p.size() || B.size() != p.size() || C.size() != p.size())
+          throw nb::value_error("points, a, b and c must have the same shape");
+        std::vector<float> q(3 * m);
+        std::vector<int32_t> feature(m);
+        for (size_t i = 0; i < m; ++i) {
+          TriClosest t = closest_point_on_triangle(row<3>(p, i), row<3>(A, i), row<3>(B, i), row<3>(C, i));
+          for (int k = 0; k < 3; ++k) q[3 * i + k] = t.q[k];
+          feature[i] = t.feature;
+        }
+        return nb::make_tuple(np(q, 3), np(feature));
+      },
+      nb::arg("points"), nb::arg("a"), nb::arg("b"), nb::arg("c"),
+      "The closest point of triangle (a[i], b[i], c[i]) to points[i] (float32 (n, 3) each) and its feature "
+      "(0 face, 1 ab, 2 bc, 3 ca, 4 a, 5 b, 6 c).");
+  m.def(
+      "mesh_sdf",
+      [](const Array& vertices, const Array& faces, const Array& points) {
+        if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw nb::value_error("vertices must have shape (n, 3)");
+        if (faces.ndim() != 2 || faces.shape(1) != 3) throw nb::value_error("faces must have shape (m, 3)");
+        if (points.ndim() != 2 || points.shape(1) != 3) throw nb::value_error("points must have shape (k, 3)");
+        std::vector<double> V = vec<double>(vertices, "vertices");
+        std::vector<int64_t> F = vec<int64_t>(faces, "faces");
+        std::vector<float> p = vec<float>(points, "points");
+        std::vector<float> rec;
+        std::string bad = write_triangle_records(V.data(), int64_t(V.size() / 3), F.data(), int64_t(F.size() / 3), rec);
+        if (!bad.empty()) throw nb::value_error(bad.c_str());
+        MeshTriangles M{rec.data(), int(F.size() / 3)};
+        size_t m = p.size() / 3;
+        std::vector<float> d(m), nrm(3 * m), q(3 * m);
+        std::vector<int32_t> tri(m), feature(m);
+        for (size_t i = 0; i < m; ++i) {
+          MeshHit h = mesh_sdf(M, row<3>(p, i));
+          d[i] = h.distance;
+          for (int k = 0; k < 3; ++k) {
+            nrm[3 * i + k] = h.normal[k];
+            q[3 * i + k] = h.closest[k];
+          }
+          tri[i] = h.triangle;
+          feature[i] = h.feature;
+        }
+        nb::dict r;
+        r["distance"] = np(d);
+        r["normal"] = np(nrm, 3);
+        r["closest"] = np(q, 3);
+        r["triangle"] = np(tri);
+        r["feature"] = np(feature);
+        r["records"] = np(rec, kTriStride);
+        return r;
+      },
+      nb::arg("vertices"), nb::arg("faces"), nb::arg("points"),
+      "Signed distance (negative inside), outward normal, closest point, triangle and feature of each point "
+      "(float32 (k, 3)) against the closed mesh (vertices float64 (n, 3), faces int64 (m, 3), outward winding); "
+      "its triangle records too. A mesh that is not closed and consistently wound is a ValueError.");
+  m.def(
+      "mesh_tree_sdf",
+      [](const std::string& backend, const Array& vertices, const Array& faces, const Array& points, float reach,
+         bool exact) {
+        if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw nb::value_error("vertices must have shape (n, 3)");
+        if (faces.ndim() != 2 || faces.shape(1) != 3) throw nb::value_error("faces must have shape (m, 3)");
+        if (points.ndim() != 2 || points.shape(1) != 3) throw nb::value_error("points must have shape (k, 3)");
+        std::vector<double> V = vec<double>(vertices, "vertices");
+        std::vector<int64_t> F = vec<int64_t>(faces, "faces");
+        std::vector<float> rec;
+        std::string bad = write_triangle_records(V.data(), int64_t(V.size() / 3), F.data(), int64_t(F.size() / 3), rec);
+        if (!bad.empty()) throw nb::value_error(bad.c_str());
+        std::vector<float> box = {3e38f, 3e38f, 3e38f, -3e38f, -3e38f, -3e38f};
+        for (size_t i = 0; i < V.size(); ++i) {
+          box[i % 3] = std::min(box[i % 3], float(V[i]));
+          box[3 + i % 3] = std::max(box[3 + i % 3], float(V[i]));
+        }
+        MeshQuery r = spatial_ops(backend)->mesh_tree(rec, int(F.size() / 3), box, vec<float>(points, "points"), reach,
+                                                      exact);
+        nb::dict d;
+        d["distance"] = np(r.distance);
+        d["normal"] = np(r.normal, 3);
+        d["closest"] = np(r.closest, 3);
+        d["triangle"] = np(r.triangle);
+        d["feature"] = np(r.feature);
+        d["overflow"] = r.overflow;
+        return d;
+      },
+      nb::arg("backend"), nb::arg("vertices"), nb::arg("faces"), nb::arg("points"), nb::arg("reach"),
+      nb::arg("exact") = true,
+      "mesh_sdf through the triangle LBVH (physics/mesh_body.h) on a backend: exact (nearest) or within the cube "
+      "of half-size reach (near; triangle -1 where none overlaps it).");
+  m.def(
+      "mesh_contact",
+      [](const std::string& backend, const Array& vertices, const Array& faces, const Array& x, const Array& v,
+         float radius, float k, float c) {
+        if (vertices.ndim() != 2 || vertices.shape(1) != 3) throw nb::value_error("vertices must have shape (n, 3)");
+        if (faces.ndim() != 2 || faces.shape(1) != 3) throw nb::value_error("faces must have shape (m, 3)");
+        if (x.ndim() != 2 || x.shape(1) != 3 || v.ndim() != 2 || v.shape(1) != 3 || x.shape(0) != v.shape(0))
+          throw nb::value_error("x and v must have the same shape (k, 3)");
+        std::vector<double> V = vec<double>(vertices, "vertices");
+        std::vector<int64_t> F = vec<int64_t>(faces, "faces");
+        std::vector<float> rec;
+        std::string bad = write_triangle_records(V.data(), int64_t(V.size() / 3), F.data(), int64_t(F.size() / 3), rec);
+        if (!bad.empty()) throw nb::value_error(bad.c_str());
+        std::vector<float> box = {3e38f, 3e38f, 3e38f, -3e38f, -3e38f, -3e38f};
+        for (size_t i = 0; i < V.size(); ++i) {
+          box[i % 3] = std::min(box[i % 3], float(V[i]));
+          box[3 + i % 3] = std::max(box[3 + i % 3], float(V[i]));
+        }
+        auto r = spatial_ops(backend)->mesh_contact(rec, int(F.size() / 3), box, vec<float>(x, "x"), vec<float>(v, "v"),
+                                                    radius, k, c);
+        nb::dict d;
+        d["force"] = np(r[0], 3);
+        d["magnitude"] = np(r[1]);
+        d["moved"] = np(r[2]);
+        d["x"] = np(r[3], 3);
+        d["v"] = np(r[4], 3);
+        return d;
+      },
+      nb::arg("backend"), nb::arg("vertices"), nb::arg("faces"), nb::arg("x"), nb::arg("v"), nb::arg("radius"),
+      nb::arg("k"), nb::arg("c"),
+      "physics/mesh_body.h's mesh_contact_force then mesh_keep_out on each particle (float32 (k, 3) x, v) on a "
+      "backend: force on the particle, its magnitude, whether keep_out moved it, and x, v after it.");
   m.def(
       "polygon_grid_sdf",
       [](const Array& vertices, const Array& points, float reach, int resolution) {

@@ -18,6 +18,7 @@
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/cell_grid.h"
 #include "corpuscle/spatial/neighbor_list.h"
+#include "corpuscle/physics/mesh_body.h"
 
 namespace cps::testing {
 
@@ -86,8 +87,22 @@ struct Lists {
   int grows = 0;         // CSR kinds: builds that grew it
 };
 
+// a mesh's signed-distance queries through its triangle tree (physics/mesh_body.h)
+struct MeshQuery {
+  std::vector<float> distance, normal, closest;
+  std::vector<int> triangle, feature;  // triangle: the mesh's numbering (-1: none)
+  int overflow = 0;
+};
+
 struct SpatialOps {
   virtual ~SpatialOps() = default;
+  // records: n triangle records (physics/triangle.h); exact: nearest(), else near()
+  virtual MeshQuery mesh_tree(const std::vector<float>& records, int n, const std::vector<float>& box,
+                              const std::vector<float>& points, float reach, bool exact) = 0;
+  // mesh_contact_force then mesh_keep_out on each particle: (force, magnitude, moved, x, v)
+  virtual std::vector<std::vector<float>> mesh_contact(const std::vector<float>& records, int n,
+                                                       const std::vector<float>& box, std::vector<float> x,
+                                                       std::vector<float> v, float r, float k, float c) = 0;
   virtual Lists gather(const IndexQuery& q) = 0;
   // each pair (i, j) that pairs() visits, in input numbering, in no particular order
   virtual std::vector<int> pairs(const IndexQuery& q) = 0;
@@ -102,6 +117,46 @@ struct SpatialOps {
 // ---------------------------------------------------------------------------------------
 // functors (CPS_HD: one definition for every backend)
 // ---------------------------------------------------------------------------------------
+// the body's contact and keep-out on each particle (physics/mesh_body.h): force, magnitude,
+// and the moved position and velocity
+struct MeshContactFn {
+  MeshTreeView v;
+  SpringDashpot law;
+  float r;
+  Vec3* x;
+  Vec3* vel;
+  Vec3* f;
+  float* mag;
+  int* moved;
+  CPS_HD void operator()(int i) const {
+    MeshHit h;
+    float m;
+    Vec3 fi;
+    mesh_contact_force(law, v, x[i], vel[i], r, fi, m, h);
+    f[i] = fi;
+    mag[i] = m;
+    moved[i] = mesh_keep_out(v, r, x[i], vel[i]) ? 1 : 0;
+  }
+};
+struct MeshQueryFn {
+  MeshTreeView v;
+  const Vec3* p;
+  float reach;
+  int exact;
+  float* dist;
+  Vec3* nrm;
+  Vec3* q;
+  int* tri;
+  int* feat;
+  CPS_HD void operator()(int i) const {
+    const MeshHit h = exact ? v.nearest(p[i], reach) : v.near(p[i], reach);
+    dist[i] = h.distance;
+    nrm[i] = h.normal;
+    q[i] = h.closest;
+    tri[i] = h.triangle;
+    feat[i] = h.feature;
+  }
+};
 struct SumOp {
   template <class T>
   CPS_HD T operator()(const T& a, const T& b) const { return a + b; }
@@ -456,6 +511,62 @@ struct SpatialOpsImpl final : SpatialOps, Driver<Exec> {
   using Driver<Exec>::ex;
   template <class T>
   using Buffer = typename Exec::template Buffer<T>;
+
+  MeshQuery mesh_tree(const std::vector<float>& records, int n, const std::vector<float>& box,
+                      const std::vector<float>& points, float reach, bool exact) override {
+    MeshTree<Exec> mesh(ex, records.data(), n, box.data(), box.data() + 3);
+    const int m = int(points.size() / 3);
+    auto p = this->template alloc<Vec3>(size_t(m));
+    if (m) ex.to_device(p.data(), points.data(), size_t(m) * sizeof(Vec3));
+    auto dist = this->template alloc<float>(size_t(m));
+    auto nrm = this->template alloc<Vec3>(size_t(m));
+    auto q = this->template alloc<Vec3>(size_t(m));
+    auto tri = this->template alloc<int>(size_t(m));
+    auto feat = this->template alloc<int>(size_t(m));
+    ex.for_each(m, MeshQueryFn{mesh.view(), p.data(), reach, exact ? 1 : 0, dist.data(), nrm.data(), q.data(),
+                               tri.data(), feat.data()});  // a plain launch: the mesh walk's stack is local
+    MeshQuery r;
+    r.distance = this->download(dist.data(), size_t(m));
+    std::vector<Vec3> nv = this->download(nrm.data(), size_t(m)), qv = this->download(q.data(), size_t(m));
+    for (int i = 0; i < m; ++i)
+      for (int k = 0; k < 3; ++k) {
+        r.normal.push_back(nv[i][k]);
+        r.closest.push_back(qv[i][k]);
+      }
+    std::vector<int> sorted = this->download(tri.data(), size_t(m));
+    std::vector<int> order = n > 0 ? this->download(mesh.order(), size_t(n)) : std::vector<int>();
+    for (int t : sorted) r.triangle.push_back(t < 0 ? -1 : order[t]);
+    r.feature = this->download(feat.data(), size_t(m));
+    r.overflow = this->download(mesh.overflow(), 1)[0];
+    return r;
+  }
+
+  std::vector<std::vector<float>> mesh_contact(const std::vector<float>& records, int n, const std::vector<float>& box,
+                                               std::vector<float> x, std::vector<float> v, float r, float k,
+                                               float c) override {
+    MeshTree<Exec> mesh(ex, records.data(), n, box.data(), box.data() + 3);
+    const int m = int(x.size() / 3);
+    auto dx = this->template alloc<Vec3>(size_t(m));
+    auto dv = this->template alloc<Vec3>(size_t(m));
+    if (m) {
+      ex.to_device(dx.data(), x.data(), size_t(m) * sizeof(Vec3));
+      ex.to_device(dv.data(), v.data(), size_t(m) * sizeof(Vec3));
+    }
+    auto f = this->template alloc<Vec3>(size_t(m));
+    auto mag = this->template alloc<float>(size_t(m));
+    auto moved = this->template alloc<int>(size_t(m));
+    ex.for_each(m, MeshContactFn{mesh.view(), SpringDashpot{k, c}, r, dx.data(), dv.data(), f.data(), mag.data(),
+                                 moved.data()});
+    auto flat = [&](const Vec3* p) {
+      std::vector<Vec3> h = this->download(p, size_t(m));
+      std::vector<float> out;
+      for (const Vec3& a : h) out.insert(out.end(), {a[0], a[1], a[2]});
+      return out;
+    };
+    std::vector<int> mv = this->download(moved.data(), size_t(m));
+    std::vector<float> mvf(mv.begin(), mv.end());
+    return {flat(f.data()), this->download(mag.data(), size_t(m)), mvf, flat(dx.data()), flat(dv.data())};
+  }
 
   Lists gather(const IndexQuery& q) override {
     if (q.dim == 2) return gather_d<2>(q);

@@ -285,6 +285,8 @@ _OUTPUT_STARTS = {
     ".png": (b"\x89PNG\r\n\x1a\n",), ".gif": (b"GIF87a", b"GIF89a"), ".pdf": (b"%PDF",),
     ".svg": (b"<?xml", b"<svg"), ".json": (b"[", b"{"), ".csv": None,
     ".md": (b"# Validation report",),  # `validate all`'s report (any other Markdown is someone's notes)
+    # surface meshes (corpuscle.surface): an OBJ is ours only with our first line
+    ".obj": (b"# corpuscle surface mesh",), ".ply": (b"ply\n",), ".vtu": (b"<?xml",), ".pvd": (b"<?xml",),
 }
 FORCE_OUTPUT = contextvars.ContextVar("corpuscle_force_output", default=False)
 

@@ -3,7 +3,9 @@
 ``--format vtk`` writes one VTK XML unstructured grid (``.vtu``, raw appended binary) per
 frame and part plus a ``.pvd`` collection that ParaView opens as one time series;
 ``--format vtkhdf`` writes a single VTKHDF file (HDF5; a temporal
-PartitionedDataSetCollection, VTKHDF 2.2, needs ``h5py``).
+PartitionedDataSetCollection, VTKHDF 2.2, needs ``h5py``); ``--format surface`` the fluid's
+surface as a mesh per frame (:mod:`corpuscle.surface`, which also holds its options). The module
+is longer than 600 lines: the frame's parts, the two writers and the command belong together.
 
 Parts of a frame: ``particles`` (the fluid group: points at ``position``, every other fluid
 field as point data), one part per other particle group (``ghost``: points at
@@ -27,6 +29,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from . import surface as _surface
 from ._camera import quat_matrix
 from ._errors import write_failure
 from ._viz_common import (AtomicOutputs, cli_warnings, missing_dirs, open_run, os_reason, parse_frames, prepare_dir,
@@ -37,7 +40,7 @@ class ExportError(ValueError):
     """Bad input to ``corpuscle export`` (one-line message)."""
 
 
-FORMATS = ("vtk", "vtkhdf")
+FORMATS = ("vtk", "vtkhdf", "surface")
 
 # VTK cell type ids (vtkCellType.h)
 VTK_VERTEX, VTK_TRIANGLE, VTK_POLYGON, VTK_QUAD = 1, 5, 7, 9
@@ -530,15 +533,19 @@ def _write_vtkhdf(h5py, sink, run, indices, header, order, schemas, statics, bar
 # ---- entry points ---------------------------------------------------------------------------
 
 
-def export_run(run, out_dir, *, format: str = "vtk", frames=None, progress: bool | None = None) -> Path:
+def export_run(run, out_dir, *, format="vtk", frames=None, progress: bool | None = None, surface=None) -> Path:
     """Export a recorded run (path or opened Run) into folder ``out_dir``.
 
-    ``format``: ``"vtk"`` (``.vtu`` per frame and part plus ``<run>.pvd``) or ``"vtkhdf"``
-    (one ``<run>.vtkhdf``). ``frames``: ``"a:b[:step]"`` or a slice (default all). Returns the
-    file to open in ParaView. Raises :class:`ExportError` for bad input.
+    ``format``: ``"vtk"`` (``.vtu`` per frame and part plus ``<run>.pvd``), ``"vtkhdf"`` (one
+    ``<run>.vtkhdf``) or ``"surface"`` (meshes: :mod:`corpuscle.surface`, ``surface`` its keywords).
+    ``frames``: ``"a:b[:step]"`` or a slice (default all). Returns the file to open in ParaView
+    (surface: the last one). Raises :class:`ExportError` for bad input.
     """
     if format not in FORMATS:
-        raise ExportError(f"unknown --format '{format}': choose {' or '.join(FORMATS)}")
+        raise ExportError(f"unknown --format '{format}': choose {', '.join(FORMATS)}")
+    if format == "surface" or surface:
+        return _surface.export_surfaces(run, out_dir, frames=frames, progress=progress, error=ExportError,
+                                        format=format, **(surface or {}))[-1]
     run = open_run(run, ExportError)
     indices = parse_frames(frames, len(run), ExportError)
     created = missing_dirs(out_dir)
@@ -571,6 +578,8 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def _run_command(args: argparse.Namespace) -> int:
+    if (code := _surface.run_surface_command(args, ExportError)) is not None:
+        return code  # --format surface (its options: only there)
     path = export_run(args.run, args.output, format=args.format, frames=args.frames,
                       progress=False if args.quiet else None)
     if not args.quiet:
@@ -579,18 +588,20 @@ def _run_command(args: argparse.Namespace) -> int:
 
 
 # one-line help and description of the subcommand (for a command table such as corpuscle.cli's)
-HELP = "export a recorded run for ParaView (VTK or VTKHDF)"
-DESCRIPTION = ("Export a recorded run as ParaView-readable files: a .vtu per frame and "
-               "part plus a .pvd series (vtk), or one .vtkhdf file (vtkhdf).")
+HELP = "export a recorded run for ParaView (VTK or VTKHDF) or its fluid surface as meshes"
+DESCRIPTION = ("Export a recorded run as ParaView-readable files: a .vtu per frame and part plus a .pvd series "
+               "(vtk), one .vtkhdf file (vtkhdf), or the fluid's surface as a mesh per frame (surface).")
 
 
 def configure_parser(p: argparse.ArgumentParser) -> None:
     """Add ``corpuscle export``'s arguments to a (sub)parser."""
     p.add_argument("run", metavar="RUN", help="recorded run (frame stream file)")
     p.add_argument("output", metavar="DIR", help="output folder (created if missing)")
-    p.add_argument("--format", default="vtk", metavar="vtk|vtkhdf", help="vtk (default) or vtkhdf")
+    p.add_argument("--format", default="vtk", metavar="vtk|vtkhdf|surface", help="vtk (default), vtkhdf or surface")
     p.add_argument("--frames", metavar="A:B[:STEP]", help="frames to export (Python slice; default all)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    _surface.configure_surface_options(p)  # --mesh, --cube-size, ...
+    p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:

@@ -169,6 +169,8 @@ class Kind:
     units: dict[str, str] = {}
     frame_fields: tuple[str, ...] = ("position",)
     ghost_fields: tuple[str, ...] = ()
+    # a liquid with a free surface (SPH): `corpuscle export --format surface` reconstructs it
+    fluid: bool = False
 
     @property
     def description(self) -> str:

@@ -300,6 +300,7 @@ def hydrostatic_density(depth, rho0: float, B: float, gamma: float, g: float) ->
 
 class SphBox(Kind):
     """A box of SPH fluid; subclasses give the geometry (:meth:`geometry`) and defaults."""
+    fluid = True
 
     particle_key = "fluid.particles"
     unstable_reasons = UNSTABLE_REASONS

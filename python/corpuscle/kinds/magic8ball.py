@@ -203,6 +203,7 @@ def _rotate_inv(q, v) -> list[float]:
 
 class Magic8Ball(Kind):
     """The magic8ball kind (see the module's documentation)."""
+    fluid = True
 
     name = "magic8ball"
     schema = SCHEMA

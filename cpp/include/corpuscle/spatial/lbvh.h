@@ -1,4 +1,4 @@
-// A linear bounding-volume hierarchy over points (Karras, "Maximizing Parallelism in the
+// A linear bounding-volume hierarchy over points, or over boxes (leaf_boxes: a mesh's triangles) (Karras, "Maximizing Parallelism in the
 // Construction of BVHs, Octrees, and k-d Trees", HPG 2012; the seed-000 WingSimulator's
 // broad phase), built through an Exec so the same functors run on the CPU and on CUDA:
 //
@@ -195,8 +195,15 @@ struct LbvhFitFn {
   const int* parent;
   int* visits;
   float* boxes;  // n - 1 boxes of 2 D floats (lo, hi)
+  const float* leaf_boxes = nullptr;  // null: the leaves are the points; else each sorted leaf's box (lo, hi)
   CPS_HD void child_box(int c, float* lo, float* hi) const {
-    if (c >= n - 1) {
+    if (c >= n - 1 && leaf_boxes) {
+      const float* b = leaf_boxes + 2 * D * (c - (n - 1));
+      for (int k = 0; k < D; ++k) {
+        lo[k] = b[k];
+        hi[k] = b[D + k];
+      }
+    } else if (c >= n - 1) {
       const Vec<D>& p = pos[c - (n - 1)];
       for (int k = 0; k < D; ++k) lo[k] = hi[k] = p[k];
     } else {
@@ -237,6 +244,10 @@ struct LbvhView {
   int* overflow = nullptr;  // raised (overflow_code, if still 0) when a traversal stack would overflow
   int overflow_code = 1;
   int stack_depth = kLbvhStack;  // traversal stack entries (at most kLbvhMaxStack on the CPU)
+  // null: the leaves are points (particles); else boxes, 2 D floats per sorted leaf (lo, hi):
+  // a tree over objects with extent (spatial/triangle_tree.h: a mesh's triangles), whose walk
+  // visits every leaf whose box overlaps the query box
+  const float* leaf_boxes = nullptr;
 
   CPS_HD int size() const { return n; }
   CPS_HD bool active(int) const { return true; }
@@ -257,6 +268,12 @@ struct LbvhView {
     return hit;
   }
   CPS_HD CPS_INLINE bool in_box(int j, const float* qlo, const float* qhi) const {
+    if (leaf_boxes) {
+      const float* b = leaf_boxes + 2 * D * j;
+      bool hit = true;
+      for (int k = 0; k < D; ++k) hit = hit && b[k] <= qhi[k] && b[D + k] >= qlo[k];
+      return hit;
+    }
     bool in = true;
     for (int k = 0; k < D; ++k) in = in && pos[j][k] >= qlo[k] && pos[j][k] <= qhi[k];
     return in;
@@ -398,13 +415,14 @@ class Lbvh {
     ex.sort_pairs(codes_[0].data(), codes_[1].data(), ids_[0].data(), ids_[1].data(), n, D == 3 ? 30 : 32);
   }
   const int* order() const { return ids_[1].data(); }
-  // the hierarchy over the sorted positions
-  void build(Exec& ex, const Vec<D>* sorted) {
+  // the hierarchy over the sorted positions (leaf_boxes: the sorted leaves' boxes, for leaves
+  // with extent; their positions then only ordered them along the curve)
+  void build(Exec& ex, const Vec<D>* sorted, const float* leaf_boxes = nullptr) {
     if (n_ < 2) return;
     ex.for_each(n_ - 1, LbvhBuildFn{codes_[1].data(), n_, left_.data(), right_.data(), parent_.data(),
                                     visits_.data(), rightmost_.data()});
     ex.for_each(n_, LbvhFitFn<D>{sorted, n_, left_.data(), right_.data(), parent_.data(), visits_.data(),
-                                 boxes_.data()});
+                                 boxes_.data(), leaf_boxes});
   }
   // overflow: where a traversal raises code when its stack (of depth entries) would overflow
   LbvhView<D> view(const Vec<D>* sorted, int* overflow, int code, int depth = kLbvhStack) {
