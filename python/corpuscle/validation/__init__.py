@@ -12,7 +12,7 @@ import importlib
 from dataclasses import asdict, dataclass
 from types import ModuleType
 
-__all__ = ["Check", "VALIDATIONS", "load", "as_dicts"]
+__all__ = ["Check", "VALIDATIONS", "load", "options_parser", "as_dicts"]
 
 
 @dataclass
@@ -47,6 +47,18 @@ def load(name: str) -> ModuleType:
         if exc.name == f"{__name__}.{VALIDATIONS[name]}":
             raise ValueError(f"validation {name!r} is not part of this build") from None
         raise
+
+
+def options_parser(name: str, parser_class=None):
+    """(the validation module, an argparse parser of its own options); ``parser_class``: the
+    parser's class (the command line passes its own, whose errors are one line)."""
+    import argparse
+
+    module = load(name)
+    cls = parser_class or argparse.ArgumentParser
+    parser = cls(prog=f"corpuscle validate {name}", description=(module.__doc__ or "").strip().splitlines()[0])
+    module.add_arguments(parser)
+    return module, parser
 
 
 def within(name: str, measured: float, reference: float, tolerance: float, unit: str = "", detail: str = "") -> Check:

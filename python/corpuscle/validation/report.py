@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import VALIDATIONS, Check, load
+from . import VALIDATIONS, Check, load, options_parser
 
 README_BEGIN = "<!-- validation-table -->"
 README_END = "<!-- /validation-table -->"
@@ -90,8 +90,6 @@ def run_one(name: str, backend: str | None, full: bool, plot_dir: Path | None, l
             extra: list[str] | None = None, label: str = "") -> Result:
     """Run one validation as ``validate all`` does (with ``extra`` options, named ``name label``);
     an error it raises becomes the result's one-line reason (a FAIL), a Ctrl-C stops everything."""
-    from ..cli.validate import options_parser
-
     module, parser = options_parser(name)
     tag = f"{name}-{label}" if label else name
     argv = [*(extra or []), *module_argv(tag, parser, backend, full, plot_dir)]
