@@ -1,0 +1,125 @@
+"""Several MPI ranks (``mpiexec -n 2``, launched by tests/mpi_launch.py; skipped without mpi4py or an
+mpiexec): the polar sweep spread over ranks gives the one-process sweep bit for bit, bad input is
+reported once and agreed on every rank, a failing or killed rank stops the others with one line
+instead of a hang, and commands that do not run over ranks say so."""
+
+from __future__ import annotations
+
+import csv
+import textwrap
+
+import pytest
+
+from mpi_launch import corpuscle, launch, single
+
+POLAR = ["polar", "wind-tunnel", "--aoa", "0,4,8", "--backend", "serial", "--particles", "600",
+         "--set", "inflow.speed=1.0", "--end-time", "0.05", "--no-plot", "--no-progress"]
+
+
+def _rows(path):
+    with open(path, newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+def test_polar_over_two_ranks_is_the_single_sweep(tmp_path):
+    # every angle is an independent run on one rank (serial backend: bitwise), so the CSV that rank 0
+    # gathers in angle order is the one-process CSV, byte for byte
+    one = single([*POLAR, "--out", str(tmp_path / "one")], tmp_path)
+    assert one.returncode == 0, one.stderr
+    two = corpuscle(2, [*POLAR, "--out", str(tmp_path / "two")], tmp_path)
+    assert two.returncode == 0, two.stdout + two.stderr
+    assert two.stdout.count("wrote") == 1  # rank 0 alone writes and reports
+    assert (tmp_path / "one.csv").read_bytes() == (tmp_path / "two.csv").read_bytes()
+    assert [float(r["angle_of_attack"]) for r in _rows(tmp_path / "two.csv")] == [0.0, 4.0, 8.0]
+
+
+def test_bad_input_is_one_line_from_rank_zero(tmp_path):
+    r = corpuscle(2, ["polar", "wind-tunnel", "--aoa", "0:x", "--no-plot"], tmp_path)
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("corpuscle:")]
+    assert len(lines) == 1 and "--aoa" in lines[0], r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_commands_of_one_rank_refuse_several(tmp_path):
+    r = corpuscle(2, ["run", "dam-break-2d", "--backend", "serial"], tmp_path)
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("corpuscle:")]
+    assert len(lines) == 1 and "one rank" in lines[0] and "distributed.md" in lines[0], r.stderr
+    assert not list(tmp_path.iterdir())  # nothing written by any rank
+
+
+def test_info_under_mpiexec_prints_once(tmp_path):
+    r = corpuscle(2, ["info"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("corpuscle ") == 1
+    mpi = [ln for ln in r.stdout.splitlines() if ln.strip().startswith("MPI")]
+    assert len(mpi) == 1 and "2 ranks" in mpi[0] and "mpi4py" in mpi[0], r.stdout
+
+
+def _script(tmp_path, body: str):
+    p = tmp_path / "job.py"
+    p.write_text(textwrap.dedent(body))
+    return p
+
+
+@pytest.mark.parametrize("how", ["error", "signal"])
+def test_a_failing_rank_stops_the_others(tmp_path, how):
+    # rank 1 fails (an uncaught error, or SIGKILL) while rank 0 waits for it in a collective: the
+    # job ends within the timeout, non-zero, with one corpuscle line naming rank 1 for the error
+    fail = ("raise RuntimeError('boom on purpose')" if how == "error"
+            else "os.kill(os.getpid(), signal.SIGKILL)")
+    job = _script(tmp_path, f"""
+        import os, signal, sys
+        from corpuscle import _mpi
+        comm = _mpi.world()
+        _mpi.agree(comm, lambda: None)
+        try:
+            if comm.Get_rank() == 1:
+                {fail}
+            comm.barrier()
+        except BaseException as exc:
+            _mpi.abort(comm, f"{{type(exc).__name__}}: {{exc}}", 1)
+    """)
+    r = launch(2, [str(job)], tmp_path, timeout=60)
+    assert r.returncode != 0
+    if how == "error":
+        lines = [ln for ln in r.stderr.splitlines() if ln.startswith("corpuscle:")]
+        assert lines == ["corpuscle: rank 1 of 2: RuntimeError: boom on purpose"], r.stderr
+
+
+def test_input_bad_on_one_rank_only_is_agreed(tmp_path):
+    # a check that fails on rank 1 only: every rank raises, rank 0 reports it naming rank 1
+    job = _script(tmp_path, """
+        import sys
+        from corpuscle import _mpi
+        comm = _mpi.world()
+        def check():
+            if comm.Get_rank() == 1:
+                raise ValueError("scene.toml: cannot read it here")
+        try:
+            _mpi.agree(comm, check)
+        except _mpi.RankInputError as exc:
+            if not exc.quiet:
+                print(f"corpuscle: error: {exc}", file=sys.stderr)
+            sys.exit(exc.exit_code)
+    """)
+    r = launch(2, [str(job)], tmp_path, timeout=60)
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("corpuscle:")]
+    assert lines == ["corpuscle: error: rank 1: scene.toml: cannot read it here"], r.stderr
+
+
+def test_plain_run_never_loads_mpi(tmp_path):
+    # without a launcher's environment nothing imports mpi4py: a plain install runs as before
+    import subprocess
+    import sys
+
+    from mpi_launch import env
+
+    plain = {k: v for k, v in env().items() if not k.startswith(("OMPI_", "PMI_", "PMIX_"))}
+    r = subprocess.run([sys.executable, "-c", "import sys; from corpuscle import _mpi; from corpuscle import cli; "
+                        "assert _mpi.world() is None and _mpi.launched_size() == 1; "
+                        "assert 'mpi4py' not in sys.modules, 'mpi4py imported'"],
+                       cwd=tmp_path, env=plain, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
