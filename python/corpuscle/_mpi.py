@@ -163,7 +163,7 @@ def abort(comm, message: str, code: int) -> None:
 _COLLECTIVE = False
 
 
-class RankInputError(Exception):
+class RankInputError(ValueError):
     """A check that failed on some rank, raised on every rank after :func:`agree` (rank 0 reports it)."""
 
     exit_code = 2

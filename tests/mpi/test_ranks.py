@@ -123,3 +123,94 @@ def test_plain_run_never_loads_mpi(tmp_path):
                         "assert 'mpi4py' not in sys.modules, 'mpi4py imported'"],
                        cwd=tmp_path, env=plain, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
+
+
+BATCH_JOB = """
+import sys
+import numpy as np
+from corpuscle import Batch, _mpi
+comm = _mpi.world()
+b = Batch.from_scene("magic8ball", n=5, backend="serial", particles=[300, 240, 300, 270, 300], seed=[4, 5, 6, 7, 8],
+                     neighbors="lists", settle=0.02, randomize=False, shake=[], comm=comm)
+lo = b.scene_offset
+assert b.n_total == 5 and b.n_scenes == (2 if comm is not None and comm.Get_rank() == 0 else 3 if comm else 5)
+b.reset()
+b.set_control(np.tile(np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.01]) * (1 + np.arange(lo, lo + b.n_scenes))[:, None], 1))
+b.advance(0.02)
+obs = b.gather_observations()
+if obs is not None:
+    np.savez(sys.argv[1], **obs)
+"""
+
+
+def test_batch_over_two_ranks_is_the_one_process_batch(tmp_path):
+    # five 8-balls of different sizes, two on rank 0 and three on rank 1, settled, reset, steered and
+    # advanced: the gathered observations are the one-process batch's bit for bit (the CPU runs each
+    # scene of a batch as its single run)
+    job = _script(tmp_path, BATCH_JOB)
+    import subprocess
+    import sys
+
+    from mpi_launch import env
+
+    plain = {k: v for k, v in env().items() if not k.startswith(("OMPI_", "PMI_", "PMIX_"))}
+    one = subprocess.run([sys.executable, str(job), str(tmp_path / "one.npz")], cwd=tmp_path, env=plain,
+                         capture_output=True, text=True, timeout=120)
+    assert one.returncode == 0, one.stderr
+    two = launch(2, [str(job), str(tmp_path / "two.npz")], tmp_path, timeout=120)
+    assert two.returncode == 0, two.stdout + two.stderr
+    import numpy as np
+
+    a, b = np.load(tmp_path / "one.npz"), np.load(tmp_path / "two.npz")
+    assert sorted(a.files) == sorted(b.files) and "die_position" in a.files
+    for k in a.files:
+        assert a[k].shape[0] == 5 and np.array_equal(a[k], b[k]), k
+    assert np.allclose(a["time"], 0.02) and len(np.unique(a["die_position"][:, 0])) == 5
+
+
+ENV_JOB = """
+import sys
+import numpy as np
+from corpuscle import _mpi
+from corpuscle.envs import Magic8BallVectorEnv
+comm = _mpi.world()
+env = Magic8BallVectorEnv(num_envs=4, target_face=[1, 2, 3, 4], backend="serial", particles=260, settle=0.02,
+                          randomize=False, episode_time=0.1, control_period=0.05, comm=comm)
+lo, n = env.batch.scene_offset, env.num_envs
+assert env.num_envs_total == 4 and env.action_space.shape == (n, 6)
+assert env.target_face.tolist() == [1, 2, 3, 4][lo:lo + n]
+obs, _ = env.reset(seed=3)
+rows = []
+for k in range(3):  # through an episode's end and the autoreset
+    a = np.sin(np.arange(lo * 6, (lo + n) * 6, dtype=np.float32).reshape(n, 6) + k)
+    obs, rew, term, trunc, _ = env.step(a)
+    rows.append(np.concatenate([obs.reshape(n, -1), rew[:, None], term[:, None], trunc[:, None]], axis=1))
+mine = np.stack(rows, axis=1)
+parts = [mine] if comm is None else comm.gather(mine, root=0)
+if parts is not None:
+    np.save(sys.argv[1], np.concatenate(parts))
+"""
+
+
+def test_vector_env_over_two_ranks_is_the_one_process_env(tmp_path):
+    # the Gymnasium vector env of four 8-balls, two a rank: observations, rewards and episode ends
+    # of every env, with actions that differ per env, are the one-process env's bit for bit
+    pytest.importorskip("gymnasium")
+    job = _script(tmp_path, ENV_JOB)
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    from mpi_launch import env
+
+    plain = {k: v for k, v in env().items() if not k.startswith(("OMPI_", "PMI_", "PMIX_"))}
+    one = subprocess.run([sys.executable, str(job), str(tmp_path / "one.npy")], cwd=tmp_path, env=plain,
+                         capture_output=True, text=True, timeout=120)
+    assert one.returncode == 0, one.stderr
+    two = launch(2, [str(job), str(tmp_path / "two.npy")], tmp_path, timeout=120)
+    assert two.returncode == 0, two.stdout + two.stderr
+    a, b = np.load(tmp_path / "one.npy"), np.load(tmp_path / "two.npy")
+    assert a.shape[0] == 4 and a.shape == b.shape
+    assert np.array_equal(a, b)
+    assert a[:, :, -2].any() or a[:, :, -1].any()  # an episode ended within the three steps
