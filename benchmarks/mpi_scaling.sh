@@ -17,10 +17,13 @@
 #   polar    `corpuscle polar wind-tunnel --aoa 0:14:2` (8 angles; PARTICLES, default 262144, and
 #            END, default 0.5 s, per angle): wall time on R ranks, speed-up and efficiency against R = 1.
 #            Independent runs: the ideal is R-fold until R exceeds the angles.
+#   batch    the 8-ball batch spread over the GPUs (benchmarks/mpi_batch.py): SCENES_PER_RANK (default
+#            4096) scenes of 1,000 particles a rank (weak scaling), scene-steps/s on R ranks; the
+#            JSON lines go to $OUT/batch.jsonl.
 #   strong / weak   one scene split over ranks (dam-break-dsph and a 16 M fluid box; 32 M per GPU):
 #            not built yet (docs/distributed.md's design); the script says so and skips them.
 #
-# Environment: OUT (logs; default ./out), RANKS, CASES (default "polar"), PARTICLES, END.
+# Environment: OUT (logs; default ./out), RANKS, CASES (default "polar batch"), PARTICLES, END, SCENES_PER_RANK.
 # Writes $OUT/scaling.log (everything, and the table) and $OUT/scaling.tsv (case, ranks, seconds).
 set -uo pipefail
 
@@ -55,7 +58,7 @@ run_all() {
   local gpus; gpus=$(nvidia-smi -L | wc -l)
   local ranks="${RANKS:-}"
   if [ -z "$ranks" ]; then ranks=""; for r in 1 2 4 8; do [ "$r" -le "$gpus" ] && ranks="$ranks $r"; done; fi
-  local cases="${CASES:-polar}" particles="${PARTICLES:-262144}" end="${END:-0.5}"
+  local cases="${CASES:-polar batch}" particles="${PARTICLES:-262144}" end="${END:-0.5}"
   printf "case\tranks\tseconds\n" > "$tsv"
   for c in $cases; do
     case "$c" in
@@ -68,6 +71,15 @@ run_all() {
             || { echo "polar on $r ranks failed (see $log)" | tee -a "$log"; continue; }
           local t1; t1=$(date +%s.%N)
           printf "polar\t%s\t%s\n" "$r" "$(python3 -c "print(f'{$t1 - $t0:.2f}')")" >> "$tsv"
+        done ;;
+      batch)
+        for r in $ranks; do
+          say "batch on $r rank(s)"
+          "$mpiexec" "${flags[@]}" -n "$r" python3 benchmarks/mpi_batch.py --backend cuda \
+            --scenes-per-rank "${SCENES_PER_RANK:-4096}" --particles 1000 --steps 100 --repeats 3 \
+            > "$OUT/batch-r$r.json" 2>>"$log" || { echo "batch on $r ranks failed (see $log)" | tee -a "$log"; continue; }
+          tee -a "$OUT/batch.jsonl" < "$OUT/batch-r$r.json" | tee -a "$log"
+          printf "batch\t%s\t%s\n" "$r" "$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['seconds'])" "$OUT/batch-r$r.json")" >> "$tsv"
         done ;;
       strong|weak)
         echo "$c: one scene split over ranks is not built yet (docs/distributed.md): skipped" | tee -a "$log" ;;
@@ -83,7 +95,9 @@ print(f"{'case':8} {'ranks':>5} {'seconds':>9} {'speed-up':>9} {'efficiency':>10
 for r in rows:
     s, n = float(r["seconds"]), int(r["ranks"])
     b = base.get(r["case"])
-    up = b / s if b else float("nan")
+    # polar: a fixed sweep (strong scaling, speed-up b / s); batch: scenes grow with the ranks
+    # (weak scaling: throughput ratio R b / s, efficiency b / s)
+    up = (b / s if r["case"] != "batch" else n * b / s) if b else float("nan")
     print(f"{r['case']:8} {n:5d} {s:9.2f} {up:9.2f} {up / n:10.1%}")
 EOF
 }
