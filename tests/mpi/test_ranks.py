@@ -6,14 +6,15 @@ instead of a hang, and commands that do not run over ranks say so."""
 from __future__ import annotations
 
 import csv
+import math
 import textwrap
 
 import pytest
 
 from mpi_launch import corpuscle, launch, single
 
-POLAR = ["polar", "wind-tunnel", "--aoa", "0,4,8", "--backend", "serial", "--particles", "600",
-         "--set", "inflow.speed=1.0", "--end-time", "0.05", "--no-plot", "--no-progress"]
+POLAR = ["polar", "wind-tunnel", "--aoa", "0,4,8", "--backend", "serial", "--particles", "1500",
+         "--set", "inflow.speed=1.0", "--set", "wing.restitution=0.5", "--end-time", "0.1", "--no-plot", "--no-progress"]
 
 
 def _rows(path):
@@ -30,7 +31,10 @@ def test_polar_over_two_ranks_is_the_single_sweep(tmp_path):
     assert two.returncode == 0, two.stdout + two.stderr
     assert two.stdout.count("wrote") == 1  # rank 0 alone writes and reports
     assert (tmp_path / "one.csv").read_bytes() == (tmp_path / "two.csv").read_bytes()
-    assert [float(r["angle_of_attack"]) for r in _rows(tmp_path / "two.csv")] == [0.0, 4.0, 8.0]
+    rows = _rows(tmp_path / "two.csv")
+    assert [float(r["angle_of_attack"]) for r in rows] == [0.0, 4.0, 8.0]
+    assert all(math.isfinite(float(r["cl"])) and int(r["blocks"]) > 0 for r in rows)  # measured, not NaN
+    assert len({r["cd"] for r in rows}) == 3
 
 
 def test_bad_input_is_one_line_from_rank_zero(tmp_path):
