@@ -35,6 +35,12 @@ def launched_size() -> int:
                 return max(1, int(v))
             except ValueError:
                 continue
+    # Slurm's srun with a PMIx or PMI plug-in sets a rank but not always the size
+    if (os.environ.get("PMIX_RANK") or os.environ.get("PMI_RANK")) and os.environ.get("SLURM_NTASKS"):
+        try:
+            return max(1, int(os.environ["SLURM_NTASKS"]))
+        except ValueError:
+            pass
     return 1
 
 
@@ -46,6 +52,12 @@ def launched_rank() -> int:
                 return int(os.environ[rank_var])
             except ValueError:
                 continue
+    for rank_var in ("PMIX_RANK", "PMI_RANK"):
+        if os.environ.get(rank_var) and os.environ.get("SLURM_NTASKS"):
+            try:
+                return int(os.environ[rank_var])
+            except ValueError:
+                continue
     return 0
 
 
@@ -53,12 +65,13 @@ _WORLD = None
 
 
 def world():
-    """``MPI.COMM_WORLD`` when this process is one of several ranks, else None (MPI never loaded).
+    """``MPI.COMM_WORLD`` when this process is one of several ranks, else None (MPI never loaded
+    without a launcher's environment; loaded but None when MPI's own world has one rank).
 
     Raises :class:`MpiUnavailable` when the launcher started several ranks and mpi4py is missing."""
     global _WORLD
     if _WORLD is not None:
-        return _WORLD
+        return _WORLD or None
     if launched_size() <= 1:
         return None
     try:
@@ -66,8 +79,8 @@ def world():
     except ImportError as exc:
         raise MpiUnavailable(f"started as one of {launched_size()} MPI ranks but mpi4py cannot be imported "
                              f"({exc}); install the extra: pip install 'corpuscle[mpi]'") from None
-    _WORLD = MPI.COMM_WORLD
-    return _WORLD
+    _WORLD = MPI.COMM_WORLD if MPI.COMM_WORLD.Get_size() > 1 else False
+    return _WORLD or None
 
 
 def rank_and_size(comm=None) -> tuple[int, int]:

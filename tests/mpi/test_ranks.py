@@ -269,3 +269,22 @@ def test_batch_over_two_ranks_sharing_one_gpu(tmp_path):
     assert a["time"].tolist() == b["time"].tolist()
     for k in ("die_position", "die_velocity"):
         assert np.allclose(a[k], b[k], atol=2e-3), k
+
+
+def test_a_launcher_of_several_ranks_whose_mpi_world_is_one_runs_as_one_process(tmp_path):
+    # a launcher's variables say 2 ranks but MPI's world (a singleton: Open MPI ignores PMI_*) has
+    # one: the whole sweep runs here, as without MPI, instead of half of it
+    import subprocess
+    import sys
+
+    from mpi_launch import env, mpiexec
+
+    if not mpiexec()[1]:
+        pytest.skip("an MPI other than Open MPI may read PMI_* and wait for a launcher")
+
+    e = {k: v for k, v in env().items() if not k.startswith(("OMPI_", "PMI_", "PMIX_"))}
+    e.update(PMI_SIZE="2", PMI_RANK="0")
+    r = subprocess.run([sys.executable, "-m", "corpuscle", *POLAR, "--out", str(tmp_path / "s")], cwd=tmp_path, env=e,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert len(_rows(tmp_path / "s.csv")) == 3

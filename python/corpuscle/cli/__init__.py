@@ -79,6 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if _mpi.launched_size() > 1:
         return _main_ranks(args)
+    return _main_one(args)
+
+
+def _main_one(args: argparse.Namespace) -> int:
     try:
         return int(args._handler(args) or 0)
     except KeyboardInterrupt as exc:
@@ -117,6 +121,8 @@ def _main_ranks(args: argparse.Namespace) -> int:
         if rank == 0:
             err(f"error: {one_line(exc)}")
         return EXIT_USAGE
+    if comm is None:  # MPI's world is one rank after all: the command as without a launcher
+        return _main_one(args)
     if args.command not in RANK_COMMANDS:
         if comm.Get_rank() == 0:
             err(f"error: `{PROG} {args.command}` runs on one rank, not {comm.Get_size()}: under mpiexec only "
