@@ -103,7 +103,6 @@ def _main_one(args: argparse.Namespace) -> int:
         return int(getattr(exc, "exit_code", EXIT_USAGE))
 
 
-
 # the commands that run over several MPI ranks (docs/distributed.md); the others refuse them
 RANK_COMMANDS = ("polar", "info")
 
@@ -140,7 +139,7 @@ def _main_ranks(args: argparse.Namespace) -> int:
         _mpi.abort(comm, "interrupted" + (f" by {by}" if by else ""), interrupt_exit_code(exc))
     except BrokenPipeError:
         _mpi.abort(comm, "stdout closed", 141)
-    except BaseException as exc:  # noqa: BLE001 - every rank must stop, not wait for this one
+    except Exception as exc:  # noqa: BLE001 - every rank must stop, not wait for this one
         if not _mpi.in_collective() and isinstance(exc, _user_errors()):
             # before the ranks agreed: the check is the same on every rank, so each reports its
             # own (rank 0 prints) and none waits for another
