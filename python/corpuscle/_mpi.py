@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 
 # (size, rank) variables of the launchers, in the order they are trusted
 _LAUNCHER_VARS = (
@@ -168,6 +169,9 @@ def abort(comm, message: str, code: int) -> None:
         pass
     sys.stderr.write(f"corpuscle: rank {comm.Get_rank()} of {comm.Get_size()}: {message}\n")
     sys.stderr.flush()
+    # the launcher forwards a rank's output through its daemon, which the abort tears down: a
+    # moment for the line to get out first (under load it was lost without this)
+    time.sleep(0.3)
     comm.Abort(code)
 
 

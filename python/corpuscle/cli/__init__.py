@@ -146,6 +146,9 @@ def _main_ranks(args: argparse.Namespace) -> int:
             if comm.Get_rank() == 0:
                 err(f"error: {one_line(exc)}")
             return int(getattr(exc, "exit_code", EXIT_USAGE))
+        from .._errors import UnstableRunError
+
+        code = EXIT_STOPPED if isinstance(exc, UnstableRunError) else int(getattr(exc, "exit_code", 1)) or 1
         _mpi.abort(comm, f"{type(exc).__name__}: {one_line(exc)}" if not isinstance(exc, _user_errors())
-                   else one_line(exc), int(getattr(exc, "exit_code", 1)) or 1)
+                   else one_line(exc), code)
     return 1
