@@ -117,9 +117,9 @@ class Batch:
     # construction ---------------------------------------------------------------------
     @classmethod
     def from_scene(cls, scene="magic8ball", n: int = 1, backend: str = "auto",
-                   overrides: dict[str, Any] | None = None, neighbors: str | None = None, device: int = 0,
+                   overrides: dict[str, Any] | None = None, neighbors: str | None = None, device: int | None = None,
                    settle: float = 1.0, randomize: bool = True, placement: str = "rotated",
-                   **kwargs) -> "Batch":
+                   comm=None, **kwargs) -> "Batch":
         """n scenes of one scene file (a built-in name, a TOML path or a Scene), with
         overrides as :meth:`corpuscle.Simulation.from_scene` takes them (dotted keys or
         ``__`` for the dot; ``particles``, ``seed``, ``end_time``). The keys of
@@ -137,11 +137,40 @@ class Batch:
         ``settle``: seconds stepped without control before the state is cached (0: none).
         ``randomize``: whether :meth:`reset`, and the start, turn each scene by a random
         symmetry (about gravity, and the die by a rotation of its cube).
+
+        ``comm`` (an mpi4py communicator, e.g. ``MPI.COMM_WORLD``; docs/distributed.md): the n
+        scenes are spread over its ranks in contiguous blocks, rank r holding scenes
+        ``[scene_offset, scene_offset + n_scenes)`` on its own backend and device (``device``
+        None: the node-local rank's GPU). Every per-scene array of the API is then the rank's
+        (B = its ``n_scenes``); :meth:`gather_observations` brings every rank's to one. Each
+        scene is built and stepped exactly as in a one-process batch of all n (bit for bit on
+        the CPU); randomized resets draw their turns per rank. The construction is checked on
+        every rank and fails on all (``ValueError``) when it fails on any.
         """
+        if comm is None:
+            return cls._build(scene, n, backend, overrides, neighbors, 0 if device is None else device, settle,
+                              randomize, placement, None, **kwargs)
+        from . import _mpi
+
+        if device is None and resolve_backend(backend) == "cuda":
+            local, _ = _mpi.node_local_rank(comm)
+            device = local % max(1, len(_core().build_info().get("gpus") or [None]))
+        return _mpi.agree(comm, lambda: cls._build(scene, n, backend, overrides, neighbors, device or 0, settle,
+                                                   randomize, placement, comm, **kwargs))
+
+    @classmethod
+    def _build(cls, scene, n, backend, overrides, neighbors, device, settle, randomize, placement, comm,
+               **kwargs) -> "Batch":
         from .scene import Scene, load_scene
 
         self = cls.__new__(cls)
         n = _count("n", n, minimum=1)
+        rank, size = (0, 1) if comm is None else (comm.Get_rank(), comm.Get_size())
+        if n < size:
+            raise ValueError(f"n = {n} scenes over {size} ranks: give every rank at least one scene")
+        lo, hi = rank * n // size, (rank + 1) * n // size  # this rank's scenes
+        n_loc = hi - lo
+        self.comm, self.scene_offset, self.n_total = comm, lo, n
         if placement not in ("rotated", "each"):
             raise ValueError(f"placement must be 'rotated' or 'each', got {placement!r}")
         if not isinstance(settle, numbers.Real) or isinstance(settle, bool) or not (0.0 <= settle < 1e6):
@@ -159,16 +188,16 @@ class Batch:
         v = base.values
         # the cheap limits first: nothing of size n is made before they hold
         n_most = int(np.max(per["fluid.particles"])) if "fluid.particles" in per else int(v["fluid.particles"])
-        if n * n_most > MAX_SLOTS:
-            raise ValueError(f"n = {n} scenes of fluid.particles = {n_most}: {n * n_most:,} particle slots, "
+        if n_loc * n_most > MAX_SLOTS:
+            raise ValueError(f"n = {n_loc} scenes{' on a rank' if comm is not None else ''} of fluid.particles = {n_most}: {n_loc * n_most:,} particle slots, "
                              f"at most {MAX_SLOTS:,}")
         self.backend = resolve_backend(backend)
         self.device = _count("device", device)
         have, where = _kinds.memory_available(Target(self.backend, "lists", self.device))
-        if have is not None and n * n_most * MIN_SLOT_BYTES > have:
+        if have is not None and n_loc * n_most * MIN_SLOT_BYTES > have:
             raise _kinds.MemoryNeedError(
-                f"n = {n}, fluid.particles = {n_most} need more than {_kinds.fmt_bytes(n * n_most * MIN_SLOT_BYTES)} "
-                f"({n * n_most:,} particle slots of at least {MIN_SLOT_BYTES} bytes), more than the "
+                f"n = {n_loc}, fluid.particles = {n_most} need more than {_kinds.fmt_bytes(n_loc * n_most * MIN_SLOT_BYTES)} "
+                f"({n_loc * n_most:,} particle slots of at least {MIN_SLOT_BYTES} bytes), more than the "
                 f"{_kinds.fmt_bytes(have)} of {where}")
         seeds = per.pop("run.seed", None)
         if seeds is None:
@@ -212,25 +241,25 @@ class Batch:
         placed = {(n_max, float(top[list(cols).index("die.side")])): ref}
         params = dict(ref.params)
         params["n_fluid"] = n_max
-        params["n_scenes"] = n
+        params["n_scenes"] = n_loc
         # per-scene parameters
         side = cols["die.side"].astype(np.float64)
         radius = float(v["container.radius"])
         die_mass, die_inertia = magic8ball.die_mass_inertia(cols["die.density"].astype(np.float64), side)
         mass = magic8ball.particle_mass(float(v["fluid.rest_density"]), radius, side, counts)
         scenes = []
-        for s in range(n):
+        for s in range(lo, hi):
             scenes.append({"n_fluid": int(counts[s]), "mass": float(mass[s]),
                            "stiffness": float(cols["fluid.stiffness"][s]), "viscosity": float(cols["fluid.viscosity"][s]),
                            "die_half": [float(side[s]) / 2] * 3, "die_mass": float(die_mass[s]),
                            "die_inertia": [float(die_inertia[s])] * 3})
         params["scenes"] = scenes
         _kinds.check_memory("magic8ball", target, params,
-                            f"n = {n}, fluid.particles = {n_max}", f"{params['max_neighbors']} neighbour slots per particle")
+                            f"n = {n_loc}, fluid.particles = {n_max}", f"{params['max_neighbors']} neighbour slots per particle")
         # initial particles: each scene's in its slot range, inactive slots at the centre
-        pos = np.zeros((n * n_max, 3), dtype=np.float32)
+        pos = np.zeros((n_loc * n_max, 3), dtype=np.float32)
         dies = []
-        for s in range(n):
+        for s in range(lo, hi):
             key = tuple(cols[k][s].item() for k in cols)
             if placement == "each":
                 b = build(dict(zip(cols, key)), int(seeds[s]))
@@ -246,20 +275,20 @@ class Batch:
                 die["position"] = _rotate(q, np.asarray(die["position"], dtype=np.float64)).tolist()
                 qd = _qmul(q, np.asarray(die["orientation"], dtype=np.float64))
                 die["orientation"] = (qd / np.linalg.norm(qd)).tolist()
-            pos[s * n_max: s * n_max + int(counts[s])] = p
+            pos[(s - lo) * n_max: (s - lo) * n_max + int(counts[s])] = p
             dies.append(die)
         params["die_initial_scenes"] = dies
         params.pop("die_initial", None)
         self.scene = base
         self.params = params
-        self.n_scenes = n
+        self.n_scenes = n_loc
         self.slots = n_max
         self.h = h
         self.answers = list(v["die.answers"])
         #: per-scene parameters as given (arrays of length n)
-        self.scene_params = {**{k: np.asarray(c).copy() for k, c in cols.items()}, "run.seed": seeds.copy()}
-        self.n_active = counts.copy()
-        self._rng = np.random.default_rng(int(seeds[0]) + 0x8BA11)
+        self.scene_params = {**{k: np.asarray(c)[lo:hi].copy() for k, c in cols.items()}, "run.seed": seeds[lo:hi].copy()}
+        self.n_active = counts[lo:hi].copy()
+        self._rng = np.random.default_rng(int(seeds[lo]) + 0x8BA11)
         self._sym = cube_rotations()
         self.core = _core().Simulation("magic8ball", self.backend, self.neighbors, params,
                                        {"position": pos, "velocity": np.zeros_like(pos)}, self.device)
@@ -433,6 +462,18 @@ class Batch:
             import jax.dlpack
             return {k: jax.dlpack.from_dlpack(v) for k, v in obs.items()}
         raise ValueError(f"like must be None, 'numpy', 'torch', 'cupy' or 'jax', got {like!r}")
+
+    def gather_observations(self, root: int | None = 0) -> dict[str, Any] | None:
+        """Every rank's :meth:`observations` as host arrays of all ``n_total`` scenes in scene
+        order: on ``root`` (None: on every rank; the others get None). Without a communicator:
+        this batch's, as host copies."""
+        obs = dict(self.core.observe(True))
+        if self.comm is None:
+            return obs
+        parts = self.comm.allgather(obs) if root is None else self.comm.gather(obs, root=root)
+        if parts is None:
+            return None
+        return {k: np.concatenate([p[k] for p in parts]) for k in obs}
 
     def scalars(self, scene: int) -> dict:
         """The core's scalars of one scene (its record and the derived values)."""

@@ -68,7 +68,13 @@ def _positive(name: str, value) -> float:
 class Magic8BallVectorEnv(VectorEnv):
     """``num_envs`` Magic 8-Balls to rig (see the module). Keyword arguments beyond the
     environment's own go to :meth:`corpuscle.Batch.from_scene` (``particles``, per-scene
-    arrays, ``fluid__viscosity``, ``settle``, ``backend``, ...)."""
+    arrays, ``fluid__viscosity``, ``settle``, ``backend``, ...).
+
+    With ``comm`` (an mpi4py communicator) the ``num_envs`` scenes are spread over its ranks
+    (docs/distributed.md): each rank's environment steps its own block of them, so its
+    ``num_envs``, spaces, observations and rewards are the rank's (``num_envs_total`` all of
+    them, ``batch.scene_offset`` where its block starts; ``batch.gather_observations()``
+    brings the batch's observations of every rank to one)."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
@@ -97,6 +103,11 @@ class Magic8BallVectorEnv(VectorEnv):
             batch_kwargs.setdefault("seed", int(seed))
         #: the batch of 8-balls (corpuscle.Batch)
         self.batch = Batch.from_scene(scene, n=self.num_envs, backend=backend, particles=particles, **batch_kwargs)
+        self.num_envs_total = self.num_envs
+        if self.batch.comm is not None:  # this rank's block of the scenes
+            lo = self.batch.scene_offset
+            self.num_envs = self.batch.n_scenes
+            self.target_face = self.target_face[lo:lo + self.num_envs].copy()
         # positions within the container, unit quaternions, the elapsed fraction; velocities unbounded
         r = float(self.batch.params["radius"])
         high = np.array([r] * 3 + [1.0] * 4 + [np.inf] * 6 + [1.0], dtype=np.float32)
@@ -115,7 +126,7 @@ class Magic8BallVectorEnv(VectorEnv):
         batch = self._open_batch()
         super().reset(seed=seed)  # self.np_random from the seed
         if seed is not None:
-            batch._rng = np.random.default_rng(seed)
+            batch._rng = np.random.default_rng(seed if batch.comm is None else [seed, batch.scene_offset])
         mask = None if options is None else options.get("reset_mask")
         if mask is not None:
             mask = np.asarray(mask)

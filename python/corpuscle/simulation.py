@@ -252,7 +252,7 @@ class Simulation:
     # construction ---------------------------------------------------------------------
     @classmethod
     def from_scene(cls, scene, backend: str = "auto", overrides: dict[str, Any] | None = None,
-                   neighbors: str | None = None, device: int = 0, **kwargs) -> "Simulation":
+                   neighbors: str | None = None, device: int = 0, comm=None, **kwargs) -> "Simulation":
         """Load a scene (built-in name, TOML path or Scene) with overrides and build it.
 
         Overrides are dotted keys (``{"fluid.stiffness": 2e4}``) or keyword arguments with
@@ -260,9 +260,14 @@ class Simulation:
         ``end_time`` are shorthands for the kind's particle key (``fluid.particles`` for the
         8-ball), ``run.seed`` and ``run.end_time``. ``neighbors`` picks the neighbour search
         (``lists``, ``grid``, ``allpairs``; the kind's first by default), ``device`` the CUDA
-        device.
+        device. ``comm`` (an mpi4py communicator): the ranks the scene is split over; one
+        rank runs it as without (several: not built yet, docs/distributed.md).
         """
         from .scene import Scene, load_scene
+
+        if comm is not None and comm.Get_size() > 1:
+            raise ValueError(f"comm: one scene split over {comm.Get_size()} ranks is not built yet "
+                             f"(docs/distributed.md); Batch.from_scene(..., comm=) spreads many scenes over ranks")
 
         if not isinstance(scene, Scene):
             scene = load_scene(scene)

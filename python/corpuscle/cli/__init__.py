@@ -75,6 +75,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         from .._viz_common import FORCE_OUTPUT
 
         FORCE_OUTPUT.set(True)
+    from .. import _mpi
+
+    if _mpi.launched_size() > 1:
+        return _main_ranks(args)
+    return _main_one(args)
+
+
+def _main_one(args: argparse.Namespace) -> int:
     try:
         return int(args._handler(args) or 0)
     except KeyboardInterrupt as exc:
@@ -94,3 +102,53 @@ def main(argv: Sequence[str] | None = None) -> int:
         err(f"error: {one_line(exc)}")
         return int(getattr(exc, "exit_code", EXIT_USAGE))
 
+
+# the commands that run over several MPI ranks (docs/distributed.md); the others refuse them
+RANK_COMMANDS = ("polar", "info")
+
+
+def _main_ranks(args: argparse.Namespace) -> int:
+    """One of several ranks under ``mpiexec``: bad input is agreed on every rank and reported
+    once (by rank 0); after that an error, an interrupt or a dead rank on any rank stops them all
+    with one line naming the rank (MPI_Abort), never a hang."""
+    from .. import _mpi
+
+    rank = _mpi.launched_rank()
+    try:
+        comm = _mpi.world()
+    except _mpi.MpiUnavailable as exc:
+        if rank == 0:
+            err(f"error: {one_line(exc)}")
+        return EXIT_USAGE
+    if comm is None:  # MPI's world is one rank after all: the command as without a launcher
+        return _main_one(args)
+    if args.command not in RANK_COMMANDS:
+        if comm.Get_rank() == 0:
+            err(f"error: `{PROG} {args.command}` runs on one rank, not {comm.Get_size()}: under mpiexec only "
+                f"{' and '.join(RANK_COMMANDS)} spread over ranks (one scene split over ranks is not built yet: "
+                f"docs/distributed.md)")
+        return EXIT_USAGE
+    try:
+        return int(args._handler(args) or 0)
+    except _mpi.RankInputError as exc:
+        if not exc.quiet:
+            err(f"error: {one_line(exc)}")
+        return exc.exit_code
+    except KeyboardInterrupt as exc:
+        by = signal_name(exc)
+        _mpi.abort(comm, "interrupted" + (f" by {by}" if by else ""), interrupt_exit_code(exc))
+    except BrokenPipeError:
+        _mpi.abort(comm, "stdout closed", 141)
+    except Exception as exc:  # noqa: BLE001 - every rank must stop, not wait for this one
+        if not _mpi.in_collective() and isinstance(exc, _user_errors()):
+            # before the ranks agreed: the check is the same on every rank, so each reports its
+            # own (rank 0 prints) and none waits for another
+            if comm.Get_rank() == 0:
+                err(f"error: {one_line(exc)}")
+            return int(getattr(exc, "exit_code", EXIT_USAGE))
+        from .._errors import UnstableRunError
+
+        code = EXIT_STOPPED if isinstance(exc, UnstableRunError) else int(getattr(exc, "exit_code", 1)) or 1
+        _mpi.abort(comm, f"{type(exc).__name__}: {one_line(exc)}" if not isinstance(exc, _user_errors())
+                   else one_line(exc), code)
+    return 1

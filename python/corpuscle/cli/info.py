@@ -23,8 +23,13 @@ def _cmd_info(args: argparse.Namespace) -> int:
         err(f"error: the compiled core is not available ({one_line(exc)}); build it with `pip install .`")
         return EXIT_USAGE
     info = dict(core.build_info())
+    from .. import _mpi
+
+    if _mpi.launched_rank() != 0:  # under mpiexec: rank 0 speaks for the run
+        return EXIT_OK
+    mpi = _mpi.describe()
     if args.json:
-        print(_json.dumps({"version": __version__, "build_info": info, "openmp_policy": _omp.policy()}))
+        print(_json.dumps({"version": __version__, "build_info": info, "openmp_policy": _omp.policy(), "mpi": mpi}))
         return EXIT_OK
     # text report
     print(f"corpuscle {__version__}")
@@ -40,6 +45,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
         mem = gpu.get("memory_gib")
         mem_text = f", {mem:.1f} GiB" if isinstance(mem, (int, float)) else ""
         print(f"  GPU {i}              {gpu.get('name')} (compute {gpu.get('compute_capability')}{mem_text})")
+    if mpi["available"]:
+        gpu_path = f"; GPU exchange {mpi['gpu_exchange']}" if info.get("cuda_compiled") else ""
+        print(f"  MPI                {mpi['library']} (MPI {mpi['standard']}, mpi4py {mpi['mpi4py']}), "
+              f"{mpi['ranks']} rank{'s' if mpi['ranks'] != 1 else ''}{gpu_path}")
+    else:
+        print(f"  MPI                no: {mpi['reason']}")
     if info.get("gpu_error"):
         print(f"  GPU                none usable: {one_line(info['gpu_error'])}")
     elif not gpus:

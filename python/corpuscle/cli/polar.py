@@ -33,6 +33,17 @@ def configure_parser(p: argparse.ArgumentParser) -> None:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from .. import _mpi
+
+    comm = _mpi.world()  # None without mpiexec: the whole sweep here
+    if comm is None:
+        return _sweep(args, None)
+    # every rank checks the same input; a failure anywhere is reported once and stops all
+    plan = _mpi.agree(comm, lambda: _plan(args))
+    return _sweep(args, comm, plan)
+
+
+def _plan(args: argparse.Namespace):
     angles = _polar.parse_aoa(args.aoa)
     args.particles = int_option("--particles", args.particles, minimum=1)
     end = float_option("--end-time", args.end_time)
@@ -58,12 +69,29 @@ def run_command(args: argparse.Namespace) -> int:
     backend = args.backend
     if backend == "auto":
         backend = "cuda" if Simulation.cuda_available() else "cpu"
+    return angles, scene, prefix, Simulation, backend
+
+
+def _sweep(args: argparse.Namespace, comm, plan=None) -> int:
+    """The sweep: with several ranks, angle i runs on rank i mod R (its own threads, its own
+    device: the node-local rank's GPU) and rank 0 gathers the rows and writes the outputs."""
+    angles, scene, prefix, Simulation, backend = plan if plan is not None else _plan(args)
+    rank, size = (0, 1) if comm is None else (comm.Get_rank(), comm.Get_size())
+    device = 0
+    if comm is not None and backend == "cuda":  # the node-local rank picks its GPU (shared when fewer)
+        from .. import _mpi
+
+        local, _ = _mpi.node_local_rank(comm)
+        gpus = import_core_module("corpuscle._core").build_info().get("gpus") or [None]
+        device = local % len(gpus)
     th = _polar.theory_curves(scene, angles)
     rows = []
     for i, a in enumerate(angles):
+        if i % size != rank:
+            continue
         t0 = time.perf_counter()
         sc = scene.with_overrides({"airfoil.angle_of_attack": a})
-        sim = Simulation.from_scene(sc, backend=backend, neighbors=args.neighbors)
+        sim = Simulation.from_scene(sc, backend=backend, neighbors=args.neighbors, device=device)
         sim.run(until=float(sc.values["run.end_time"]), chunk=500)
         r = sim.result()
         row = {"angle_of_attack": a, "steps": int(sim.steps), "particles": int(sim.n_particles),
@@ -71,12 +99,19 @@ def run_command(args: argparse.Namespace) -> int:
         for k in ("cl", "cl_se", "cd", "cd_se", "cm", "cm_se", "lift", "drag", "moment", "blocks"):
             row[k] = r.get(k, float("nan"))
         rows.append(row)
+        row["_index"] = i
         if not args.no_progress:
             measured = (f"C_L, C_D: not measured ({r['not_measured']})" if r.get("not_measured") else
                         f"C_L {row['cl']:.4g} ± {row['cl_se']:.2g}, C_D {row['cd']:.4g} ± {row['cd_se']:.2g}")
-            print(f"alpha {a:7.3f} deg: {measured} ({row['steps']} steps, {time.perf_counter() - t0:.1f} s)",
-                  file=sys.stderr)
+            where = f" (rank {rank})" if size > 1 else ""
+            print(f"alpha {a:7.3f} deg: {measured} ({row['steps']} steps, {time.perf_counter() - t0:.1f} s){where}",
+                  file=sys.stderr, flush=True)
         del sim
+    if comm is not None:
+        parts = comm.gather(rows, root=0)
+        if rank != 0:
+            return 0
+        rows = sorted((r for part in parts for r in part), key=lambda r: r["_index"])
     csv_path = prefix.with_name(prefix.name + ".csv")
     try:
         with open(csv_path, "w", newline="", encoding="utf-8") as f:
