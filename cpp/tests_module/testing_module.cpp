@@ -629,7 +629,7 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("backend"), nb::arg("vertices"), nb::arg("faces"), nb::arg("points"), nb::arg("reach"),
       nb::arg("exact") = true,
-      "mesh_sdf through the triangle LBVH (physics/mesh_body.h) on a backend: exact (nearest) or within the cube "
+      "mesh_sdf through the triangle LBVH (dem/mesh_body.h) on a backend: exact (nearest) or within the cube "
       "of half-size reach (near; triangle -1 where none overlaps it).");
   m.def(
       "mesh_contact",
@@ -661,7 +661,7 @@ NB_MODULE(_testing, m) {
       },
       nb::arg("backend"), nb::arg("vertices"), nb::arg("faces"), nb::arg("x"), nb::arg("v"), nb::arg("radius"),
       nb::arg("k"), nb::arg("c"),
-      "physics/mesh_body.h's mesh_contact_force then mesh_keep_out on each particle (float32 (k, 3) x, v) on a "
+      "dem/mesh_body.h's mesh_contact_force then mesh_keep_out on each particle (float32 (k, 3) x, v) on a "
       "backend: force on the particle, its magnitude, whether keep_out moved it, and x, v after it.");
   m.def(
       "polygon_grid_sdf",

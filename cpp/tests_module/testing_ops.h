@@ -18,7 +18,7 @@
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/cell_grid.h"
 #include "corpuscle/spatial/neighbor_list.h"
-#include "corpuscle/physics/mesh_body.h"
+#include "corpuscle/dem/mesh_body.h"
 
 namespace cps::testing {
 
@@ -87,7 +87,7 @@ struct Lists {
   int grows = 0;         // CSR kinds: builds that grew it
 };
 
-// a mesh's signed-distance queries through its triangle tree (physics/mesh_body.h)
+// a mesh's signed-distance queries through its triangle tree (dem/mesh_body.h)
 struct MeshQuery {
   std::vector<float> distance, normal, closest;
   std::vector<int> triangle, feature;  // triangle: the mesh's numbering (-1: none)
@@ -117,7 +117,7 @@ struct SpatialOps {
 // ---------------------------------------------------------------------------------------
 // functors (CPS_HD: one definition for every backend)
 // ---------------------------------------------------------------------------------------
-// the body's contact and keep-out on each particle (physics/mesh_body.h): force, magnitude,
+// the body's contact and keep-out on each particle (dem/mesh_body.h): force, magnitude,
 // and the moved position and velocity
 struct MeshContactFn {
   MeshTreeView v;

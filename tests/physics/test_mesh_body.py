@@ -1,4 +1,4 @@
-"""physics/mesh_body.h (through corpuscle._testing.mesh_tree_sdf): a closed mesh's triangles in the
+"""dem/mesh_body.h (through corpuscle._testing.mesh_tree_sdf): a closed mesh's triangles in the
 LBVH over their boxes, queried on every backend against the brute force over every triangle
 (physics/triangle.h's mesh_sdf, itself checked against float64 in test_triangle.py): the exact
 nearest point for points near, far outside and deep inside, and the contact query within a reach."""
