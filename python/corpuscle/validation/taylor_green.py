@@ -32,15 +32,15 @@ RES_FULL = (25, 50, 100)
 MACH = 0.1  # U / c0 of the scene
 # tolerances and their origins:
 # - decay at the finest run: weak compressibility changes the kinetic energy budget by O(Ma^2)
-#   = 1 % and the kernel's discretisation of the viscous term by O((k hs)^2): k hs = 2 pi 1.5 / 40
-#   = 0.24 at L/dp = 40, (k hs)^2 / 2 = 2.8 %; their sum, 4 %, bounds the relative error of
-#   U(t)/U(0) (with --full at L/dp = 100: 1 % + 0.4 %, the bound taken as 2 %);
+#   = 1 % and the kernel's discretisation of the viscous term by O((k hs)^2): k hs = 2 pi 2 / 40
+#   = 0.31 at L/dp = 40 (hs = 2 dp, the scene's), (k hs)^2 / 2 = 4.9 %; their sum, 6 %, bounds
+#   the relative error of U(t)/U(0) (with --full at L/dp = 100: 1 % + 0.8 %, taken as 2 %);
 # - the effective viscosity: the same bound over the decay exponent 8 pi^2 nu t = 0.39, i.e. the
-#   bound on the amplitude divided by the exponent (4 % / 0.39 ~ 10 %, --full 2 % / 0.39 ~ 5 %);
+#   bound on the amplitude divided by the exponent (6 % / 0.39 ~ 15 %, --full 2 % / 0.39 ~ 5 %);
 # - the observed order of the decay error at least 1 (a consistent scheme: the error falls at
 #   least linearly with dp; SPH on a perturbed lattice is between first and second order).
-TOL_DECAY = {False: 0.04, True: 0.02}
-TOL_NU = {False: 0.10, True: 0.05}
+TOL_DECAY = {False: 0.06, True: 0.02}
+TOL_NU = {False: 0.15, True: 0.05}
 MIN_ORDER = 1.0
 
 
