@@ -26,7 +26,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..schema import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
+from ..schema import INT64_MAX, CrossCheck, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
 from ._sph_bodies import MAX_BODIES, body_keys, build_bodies, check_bodies, header_obstacles
 from ._sph_probes import (PROBE_SERIES, ProbeSeries, _check_probe_faces, _check_probes, _probes_inside,  # noqa: F401
@@ -90,7 +90,81 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
                                   "timestep.verlet_steps) or symplectic-euler (needs a CFL near 0.05)",
                                   choices=tuple(INTEGRATORS)),
         "timestep.verlet_steps": _K("int", 40, "steps", 1, 10**6, "Verlet: an Euler step every this many steps"),
+    } | boundary_keys(dim)
+
+
+def boundary_keys(dim: int) -> dict[str, KeySpec]:
+    """Periodic axes, moving walls, a body force and the initial flow (the canonical flows:
+    Taylor-Green, Poiseuille, the lid-driven cavity)."""
+    vec = f"vec{dim}"
+    return {
+        "boundary.periodic": _K("list[str]", [], "", doc="periodic axes (" + ", ".join("xyz"[:dim]) + "): no walls "
+                                "across them, the fluid leaving one face enters the other and neighbours are found "
+                                "across it (the minimum image)"),
+        "walls.moving": _K("list[str]", [], "", doc="walls that move (a lid): faces " + ", ".join(
+                           f"{a}-, {a}+" for a in "xyz"[:dim]) + " (top = " + "xyz"[dim - 1] + "+, bottom = "
+                           + "xyz"[dim - 1] + "-); their particles carry walls.velocity in the pair terms and stay "
+                           "in place (a wall sliding in its own plane)"),
+        "walls.velocity": _K(vec, [0.0] * dim, "m/s", -1e4, 1e4, "the moving walls' velocity (tangential to them)"),
+        "fluid.body_force": _K(vec, [0.0] * dim, "m/s^2", -1e6, 1e6, "a body acceleration added to gravity (drives "
+                               "a periodic channel: Poiseuille flow)"),
+        "fluid.background_pressure": _K("float", 0.0, "Pa", 0.0, 1e9, "a constant added to the pressure in the "
+                                        "pressure gradient only (keeps it positive in a vortex's core: no tensile "
+                                        "instability; the pressure fields report p without it)"),
+        "sph.shifting": _K("float", 0.0, "", 0.0, 100.0, "particle shifting A (Skillen et al. 2013: each step a "
+                           "particle moves by -A hs |v| dt grad C, keeping the particles evenly spread in a "
+                           "stretching flow; 2 is DualSPHysics's); 0: off. For flows with no free surface"),
+        "flow.initial": _K("enum", "rest", "", doc="the fluid's initial velocity: rest, or taylor-green (2-D, "
+                           "periodic in x and y: u = U sin(2 pi x / Lx) cos(2 pi y / Ly), v = -U cos sin, with its "
+                           "pressure)", choices=("rest", "taylor-green")),
+        "flow.speed": _K("float", 1.0, "m/s", 0.0, 1e4, "U of flow.initial = taylor-green", lo_open=True),
     }
+
+
+def _face(name: str, dim: int) -> tuple[int, int] | None:
+    """(axis, side) of a face name (x-, x+, ..., top, bottom; side -1 or +1), None if unknown."""
+    if name == "top":
+        return dim - 1, 1
+    if name == "bottom":
+        return dim - 1, -1
+    if len(name) == 2 and name[0] in "xyz"[:dim] and name[1] in "+-":
+        return "xyz".index(name[0]), 1 if name[1] == "+" else -1
+    return None
+
+
+def _check_boundaries(dim: int) -> CrossCheck:
+    """Periodic axes are axes of the kind, once each, with no moving wall on them; moving walls
+    are faces of the box sliding in their own plane; the Taylor-Green start needs 2-D and both
+    axes periodic."""
+    axes = "xyz"[:dim]
+
+    def check(values, arrays) -> None:
+        per = list(values["boundary.periodic"])
+        for a in per:
+            if a not in axes:
+                raise SceneError(f"boundary.periodic = {_fmt_value(per)}: {a!r} is not an axis of this kind "
+                                 f"({', '.join(axes)})")
+        if len(set(per)) != len(per):
+            raise SceneError(f"boundary.periodic = {_fmt_value(per)} names an axis twice")
+        moving = list(values["walls.moving"])
+        vel = np.asarray(values["walls.velocity"], dtype=np.float64)
+        for f in moving:
+            fa = _face(f, dim)
+            if fa is None:
+                raise SceneError(f"walls.moving = {_fmt_value(moving)}: {f!r} is not a face (" + ", ".join(
+                    f"{a}-, {a}+" for a in axes) + ", top, bottom)")
+            if axes[fa[0]] in per:
+                raise SceneError(f"walls.moving = {_fmt_value(moving)}: the face {f!r} lies across the periodic axis "
+                                 f"{axes[fa[0]]!r} (boundary.periodic), which has no walls")
+            if vel[fa[0]] != 0.0:
+                raise SceneError(f"walls.velocity = {_fmt_value(values['walls.velocity'])} moves the wall {f!r} "
+                                 f"along its normal: only walls sliding in their own plane are supported")
+        if len(set(_face(f, dim) for f in moving)) != len(moving):
+            raise SceneError(f"walls.moving = {_fmt_value(moving)} names a face twice")
+        if values["flow.initial"] == "taylor-green" and (dim != 2 or set(per) != {"x", "y"}):
+            raise SceneError(f"flow.initial = 'taylor-green' needs a 2-D kind periodic in x and y "
+                             f"(boundary.periodic = [\"x\", \"y\"]), got boundary.periodic = {_fmt_value(per)}")
+    return check
 
 
 def _check_lanes(values, arrays) -> None:
@@ -164,6 +238,9 @@ class SphBox(Kind):
         hs = smoothing * dp
         h = 2.0 * hs
         layers = int(math.ceil(h / dp - 1e-6))
+        # periodic axes: no wall layers across them (the walls of the other axes span the period)
+        periodic = np.array(["xyz"[k] in v["boundary.periodic"] for k in range(D)])
+        wall_layers = np.where(periodic, 0, layers)
         # [[bodies]]: their boundary particles join the walls; no fluid inside them (_sph_bodies.py)
         fluid_pts = lattice(f0, f1, dp)
         bodies, body_pts, _, clear = build_bodies(scene.arrays, D, dp, layers, fluid_pts)
@@ -171,7 +248,7 @@ class SphBox(Kind):
         nf_est = len(fluid_pts)
         if nf_est == 0:
             raise SceneError("bodies: the bodies fill the whole fluid block (no fluid is left)")
-        box_cells = np.prod(nb + 2 * layers) - np.prod(nb) + len(body_pts)
+        box_cells = int(np.prod(nb + 2 * wall_layers) - np.prod(nb)) + len(body_pts)
         if nf_est + box_cells > 2**31 - 1:
             raise SceneError(f"{key_values(scene, ('fluid.particles', 'fluid.spacing'))}: "
                              f"{nf_est + box_cells} particles, more than 2^31 - 1")
@@ -186,7 +263,11 @@ class SphBox(Kind):
         B = core().tait_stiffness(c0, rho0, gamma)  # c0^2 rho0 / gamma (physics/tait.h, in double)
         box_hi = nb * dp
         probes = [p["position"] for p in scene.arrays.get("probes", [])]
-        gravity = [0.0] * (D - 1) + [-g]
+        gravity = (np.array([0.0] * (D - 1) + [-g]) + np.asarray(v["fluid.body_force"], dtype=np.float64)).tolist()
+        skin_ = float(v["sph.skin"]) if target.index == "lists" else 0.0
+        self._check_periods(scene, periodic, box_hi, h * (1.0 + skin_))
+        domain_lo = np.where(periodic, 0.0, -(layers + 1) * dp)
+        domain_hi = np.where(periodic, box_hi, box_hi + (layers + 1) * dp)
         params = {
             "n_fluid": nf_est, "n_wall": int(box_cells), "kernel": KERNELS[v["sph.kernel"]], "h": h, "hs": hs,
             "mass": rho0 * dp ** D, "rho0": rho0, "c0": c0, "gamma": gamma,
@@ -196,9 +277,11 @@ class SphBox(Kind):
             "dt_max": float(v["timestep.dt_max"]), "gravity": gravity,
             "integrator": INTEGRATORS[v["timestep.integrator"]], "verlet_steps": int(v["timestep.verlet_steps"]),
             "box_lo": [0.0] * D, "box_hi": box_hi.tolist(),
-            "domain_lo": (-(layers + 1) * dp * np.ones(D)).tolist(), "domain_hi": (box_hi + (layers + 1) * dp).tolist(),
+            "domain_lo": domain_lo.tolist(), "domain_hi": domain_hi.tolist(),
             "probes": [float(x) for p in probes for x in p],
             **probe_face_params(scene.arrays, D, dp),
+            "periodic": int(sum(1 << k for k in range(D) if periodic[k])),
+            "background_pressure": float(v["fluid.background_pressure"]), "shifting": float(v["sph.shifting"]),
         }
         # --neighbors lists: slot lists within h (1 + skin), rebuilt once a particle has moved
         # skin h / 2; capacity 1.3 times the count within that reach at the lattice spacing
@@ -213,9 +296,10 @@ class SphBox(Kind):
         check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
                      f"{nf_est + box_cells} particles")
         # the walls: every lattice point of the box widened by `layers` that is not inside it
-        pts = lattice(-layers * np.ones(D, dtype=np.int64), nb + layers, dp)
+        pts = lattice(-wall_layers, nb + wall_layers, dp)
         inside = np.all((pts > 0.0) & (pts < box_hi), axis=1)
         wall = np.concatenate([pts[~inside], body_pts]) if len(body_pts) else pts[~inside]
+        wall_vel = self._wall_velocity(v, wall, box_hi)
         top = float(f1[-1] * dp)
         near = np.all((wall[:, :-1] > (f0[:-1] - layers) * dp) & (wall[:, :-1] < (f1[:-1] + layers) * dp), axis=1)
         wall_rho = np.where(near, hydrostatic_density(top - wall[:, -1], rho0, B, gamma, g), rho0)
@@ -223,6 +307,8 @@ class SphBox(Kind):
             pos = fluid_pts
             vel = np.zeros_like(pos)
             rho = hydrostatic_density(top - pos[:, -1], rho0, B, gamma, g)
+            if v["flow.initial"] == "taylor-green":
+                vel, rho = taylor_green(pos, box_hi, float(v["flow.speed"]), rho0, B, gamma)
         else:
             pos = np.asarray(checkpoint["position"], dtype=np.float64)
             vel = np.asarray(checkpoint["velocity"], dtype=np.float64)
@@ -238,17 +324,46 @@ class SphBox(Kind):
                   "density": np.ascontiguousarray(rho, dtype=np.float32),
                   "wall_position": np.ascontiguousarray(wall, dtype=np.float32).reshape(-1, D),
                   "wall_density": np.ascontiguousarray(wall_rho, dtype=np.float32)}
+        if wall_vel is not None:
+            arrays["wall_velocity"] = np.ascontiguousarray(wall_vel, dtype=np.float32).reshape(-1, D)
         info = {"spacing": dp, "h": h, "hs": hs, "mass": rho0 * dp ** D, "rho0": rho0, "c0": c0, "B": B,
                 "gamma": gamma, "gravity": g, "layers": layers, "box": box_hi.copy(), "fluid_height": height,
                 "fluid_lo": f0 * dp, "fluid_hi": f1 * dp, "n_fluid": nf_est, "n_wall": int(box_cells),
                 "probe_names": [str(p["name"]) for p in scene.arrays.get("probes", [])],
                 "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D),
-                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies)}
+                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies),
+                "periodic": [a for a in "xyz"[:D] if a in v["boundary.periodic"]],
+                "moving_walls": list(v["walls.moving"]), "wall_speed": list(map(float, v["walls.velocity"])),
+                "body_force": list(map(float, v["fluid.body_force"]))}
         info.update(self.extra_info(v, info))
         return Build(params, arrays, info)
 
     def extra_info(self, v, info) -> dict[str, Any]:
         return {}
+
+    # periodic axes and moving walls ------------------------------------------------------------
+    def _check_periods(self, scene, periodic, box_hi, radius: float) -> None:
+        """A periodic axis holds three cells of the neighbour search's radius (so the cells
+        around one are three distinct ones): one line naming the keys otherwise."""
+        for k in np.flatnonzero(periodic):
+            if box_hi[k] < 3.0 * radius * (1.0 + 4e-6):
+                raise SceneError(f"boundary.periodic = {_fmt_value(list(scene.values['boundary.periodic']))}: the "
+                                 f"box is {box_hi[k]:.4g} m along {'xyz'[k]}, less than three neighbour radii "
+                                 f"(3 x {radius:.4g} m, the kernel support 2 sph.smoothing dp with the lists' skin): "
+                                 f"use a longer box or a smaller spacing")
+
+    def _wall_velocity(self, v, wall: np.ndarray, box_hi: np.ndarray) -> np.ndarray | None:
+        """The wall particles' prescribed velocity: walls.velocity on the particles beyond a
+        face of walls.moving (the corners' too), zero elsewhere; None when no wall moves."""
+        if not v["walls.moving"]:
+            return None
+        moving = np.zeros(len(wall), dtype=bool)
+        for f in v["walls.moving"]:
+            axis, side = _face(f, self.dim)
+            moving |= wall[:, axis] > box_hi[axis] if side > 0 else wall[:, axis] < 0.0
+        out = np.zeros_like(wall)
+        out[moving] = np.asarray(v["walls.velocity"], dtype=np.float64)
+        return out
 
     # reading -----------------------------------------------------------------------------
     def probes(self, sim, s: dict[str, Any] | None = None) -> dict[str, dict[str, Any]]:
@@ -402,6 +517,19 @@ class SphBox(Kind):
         return np.asarray(sim.core.download("position"), dtype=np.float64)
 
 
+def taylor_green(pos: np.ndarray, size: np.ndarray, U: float, rho0: float, B: float, gamma: float):
+    """The 2-D Taylor-Green vortex at t = 0 in a periodic box of size (Lx, Ly): velocity
+    u = U sin(kx x) cos(ky y), v = -U (kx / ky) cos(kx x) sin(ky y) (divergence-free), and the
+    density of its pressure p = rho0 U^2 / 4 (cos(2 kx x) + (kx / ky)^2 cos(2 ky y)) by Tait's
+    equation of state inverted (the core's, physics/tait.h)."""
+    kx, ky = 2.0 * math.pi / size[0], 2.0 * math.pi / size[1]
+    x, y = pos[:, 0], pos[:, 1]
+    vel = np.column_stack([U * np.sin(kx * x) * np.cos(ky * y), -U * (kx / ky) * np.cos(kx * x) * np.sin(ky * y)])
+    p = 0.25 * rho0 * U * U * (np.cos(2.0 * kx * x) + (kx / ky) ** 2 * np.cos(2.0 * ky * y))
+    rho = core().tait_density(np.ascontiguousarray(p, dtype=np.float64), rho0, B, gamma)
+    return vel, np.asarray(rho, dtype=np.float64)
+
+
 def dam_front(pos: np.ndarray, dp: float) -> float:
     """The surge front: the largest x of the fluid plus half a spacing (a particle's extent)."""
     return float(pos[:, 0].max() + 0.5 * dp)
@@ -426,5 +554,6 @@ def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int,
                      max_in_arrays={"probes": 64,  # kMaxProbes of scenes/sph/model.h
                                     "bodies": MAX_BODIES},
                      checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_probe_faces,
-                             _check_lanes, *checks, _probes_inside(box), check_bodies(box, dim)])
+                             _check_lanes, *checks, _probes_inside(box), _check_boundaries(dim),
+                             check_bodies(box, dim)])
 

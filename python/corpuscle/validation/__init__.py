@@ -34,7 +34,9 @@ class Check:
 
 
 # CLI name -> module of this package
-VALIDATIONS = {"dam-break": "dam_break", "hydrostatic": "hydrostatic", "wind-tunnel": "wind_tunnel"}
+VALIDATIONS = {"dam-break": "dam_break", "hydrostatic": "hydrostatic", "wind-tunnel": "wind_tunnel",
+               # the canonical flows (periodic boundaries, moving walls: docs/sph_box.md)
+               "taylor-green": "taylor_green", "poiseuille": "poiseuille", "lid-driven-cavity": "lid_driven_cavity"}
 
 
 def load(name: str) -> ModuleType:

@@ -11,7 +11,8 @@
 namespace cps {
 
 using Kinds = KindList<m8::Entry, wt::Entry<2>, wt::Entry<3>, sph::Entry<sph::FluidBoxKind>,
-                       sph::Entry<sph::DamBreakKind>, sph::Entry<sph::DamBreak2Kind>, ftest::Entry>;
+                       sph::Entry<sph::DamBreakKind>, sph::Entry<sph::DamBreak2Kind>,
+                       sph::Entry<sph::FluidBox2Kind>, ftest::Entry>;
 
 // a simulation of r's kind on the backend `ex`
 template <class Exec>

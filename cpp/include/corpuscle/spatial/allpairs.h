@@ -10,6 +10,7 @@
 #pragma once
 #include "corpuscle/spatial/index.h"
 #include "corpuscle/spatial/lane_walks.h"
+#include "corpuscle/spatial/periodic.h"
 
 namespace cps {
 
@@ -19,6 +20,8 @@ struct AllPairsView {
   const Vec<D>* pos = nullptr;
   int n = 0;
   float r2 = 0.0f;  // squared query radius
+  Periodic<D> per;  // periodic axes: the minimum-image displacement (gather, pairs, the tiled
+                    // gather; not gather_range / list_range)
 
   CPS_HD int size() const { return n; }
   CPS_HD bool active(int) const { return true; }
@@ -33,7 +36,7 @@ struct AllPairsView {
   template <class Visit>
   CPS_HD void gather(int /*i*/, const Vec<D>& xi, Visit&& visit) const {
     for (int j = 0; j < n; ++j) {
-      Vec<D> d = xi - pos[j];
+      Vec<D> d = per.displacement(xi - pos[j]);
       float rr = norm2(d);
       if (rr < r2) visit(j, d, rr);
     }
@@ -41,7 +44,7 @@ struct AllPairsView {
   template <class Visit>
   CPS_HD void pairs(int i, const Vec<D>& xi, Visit&& visit) const {
     for (int j = i + 1; j < n; ++j) {
-      Vec<D> d = xi - pos[j];
+      Vec<D> d = per.displacement(xi - pos[j]);
       float rr = norm2(d);
       if (rr < r2) visit(j, d, rr);
     }
@@ -108,7 +111,7 @@ struct AllPairsTiledGatherFn {
         const int i = tile * K + l;
         if (i >= n) return;
         for (int k = 0; k < m; ++k) {
-          Vec<D> d = xi[l] - sh[k];
+          Vec<D> d = view.per.displacement(xi[l] - sh[k]);
           float rr = norm2(d);
           if (rr < view.r2) stage.visit(acc[l], i, base + k, d, rr);
         }

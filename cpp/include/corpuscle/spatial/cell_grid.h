@@ -27,6 +27,14 @@
 // 64-bit keys (the wind tunnel's sort at 2M particles is a third of its step). The view reads
 // either width through key(); the 32-bit sentinel is all ones, as the 64-bit one.
 //
+// Periodic axes (make_cell_grid's `periodic` mask, spatial/periodic.h): the domain's extent
+// along such an axis is the period; it holds floor(extent / cell) >= 3 cells (the last one
+// takes the remainder, so it may be up to twice as wide: a neighbour within the radius is
+// still at most one cell away), the block around a cell wraps across the periodic faces (3
+// distinct cells, so nothing is visited twice), a row that wraps is read as two ranges, and
+// the walk's displacement is the minimum image. Positions must lie inside the period (the
+// stage that moves them wraps them: Periodic::wrap).
+//
 // Build: sort (keys, stable sort; order() maps sorted slot -> input slot), reorder (the
 // caller's arrays, or the grid's own copy of the positions), mark (cell ranges from the
 // sorted keys). The view (CellGridView) follows the protocol of spatial/index.h; its slot
@@ -41,6 +49,7 @@
 #include "corpuscle/core/error.h"
 #include "corpuscle/spatial/index.h"
 #include "corpuscle/spatial/morton.h"
+#include "corpuscle/spatial/periodic.h"
 
 namespace cps {
 
@@ -72,6 +81,7 @@ struct CellGridSpec {
   int cell_bits = 0;     // the key's bits below the tag (Morton: D * bits)
   int ntags = 1;         // tags 0 .. ntags-1
   int key_bits = 0;      // key bits the sort looks at
+  Periodic<D> per;       // the periodic axes (mask 0: none)
 
   CPS_HD int tag_shift() const { return cell_bits; }
   // the keys fit a 32-bit word (and the 32-bit sentinel, all ones, stays above every real key)
@@ -114,7 +124,8 @@ struct CellGridSpec {
 // max_cells ranges
 template <int D>
 inline CellGridSpec<D> make_cell_grid(const Vec<D>& lo, const Vec<D>& hi, float radius, int ntags = 1,
-                                      uint64_t max_cells = kCellGridMaxCells, CellOrder order = CellOrder::Morton) {
+                                      uint64_t max_cells = kCellGridMaxCells, CellOrder order = CellOrder::Morton,
+                                      unsigned periodic = 0u) {
   if (!(radius > 0.0f) || !finite(radius))
     throw Error("cell grid: the radius must be positive and finite, got " + std::to_string(radius));
   if (ntags < 1) throw Error("cell grid: needs at least one tag, got " + std::to_string(ntags));
@@ -144,6 +155,13 @@ inline CellGridSpec<D> make_cell_grid(const Vec<D>& lo, const Vec<D>& hi, float 
   for (int k = 0; k < D; ++k) {
     const double n = std::ceil(extent[k] / double(cell));
     g.dims[k] = n < 1.0 ? 1 : int(n);
+    if ((periodic >> k) & 1u) {  // whole cells of at least `cell` tile the period
+      const double whole = std::floor(extent[k] / double(cell));
+      if (whole < 3.0)
+        throw Error("cell grid: the periodic axis " + std::to_string(k) + " is " + std::to_string(extent[k]) +
+                    " long, less than 3 cells of " + std::to_string(cell) + " (the period must hold three query radii)");
+      g.dims[k] = int(whole);
+    }
     widest = g.dims[k] > widest ? g.dims[k] : widest;
     g.origin[k] = lo[k];
   }
@@ -163,6 +181,7 @@ inline CellGridSpec<D> make_cell_grid(const Vec<D>& lo, const Vec<D>& hi, float 
   while ((int64_t(1) << g.bits) < int64_t(widest)) ++g.bits;
   int tag_bits = 0;  // 2^tag_bits > ntags: every real key stays below the sentinel's low key_bits bits
   while ((int64_t(1) << tag_bits) <= int64_t(ntags)) ++tag_bits;
+  g.per = Periodic<D>::make(periodic, lo, hi);
   g.rows = order == CellOrder::Rows;
   g.cell_bits = D * g.bits;
   if (g.rows) {
@@ -282,11 +301,16 @@ struct CellGridView {
   CPS_HD void block_rows(const Vec<D>& xi, int t0, int t1, F&& f) const {
     int c[D];
     spec.cell_of(xi, c);
-    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, at[3] = {0, 0, 0};
+    // the block's cells per axis as offsets -1, 0, 1 from xi's cell: lo..hi (an offset past a
+    // non-periodic border is left out; past a periodic one it wraps to the other end)
+    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, at[3] = {0, 0, 0}, dim[3] = {1, 1, 1};
+    bool wraps[3] = {false, false, false};
     float g2[3][3] = {{0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}};  // [axis][offset + 1]
     for (int k = 0; k < D; ++k) {
-      lo[k] = c[k] > 0 ? c[k] - 1 : 0;
-      hi[k] = c[k] + 1 < spec.dims[k] ? c[k] + 1 : spec.dims[k] - 1;
+      wraps[k] = spec.per.on(k);
+      dim[k] = spec.dims[k];
+      lo[k] = wraps[k] || c[k] > 0 ? -1 : 0;
+      hi[k] = wraps[k] || c[k] + 1 < spec.dims[k] ? 1 : 0;
       at[k] = c[k];
       if constexpr (kCull) {
         const double face = double(spec.origin[k]) + double(c[k]) * double(spec.cell);
@@ -300,15 +324,29 @@ struct CellGridView {
     const uint64_t dxy = D == 3 ? dx * uint64_t(spec.dims[1]) : 0;
     for (int t = t0; t < t1; ++t) {
       const uint64_t tbase = uint64_t(t) * spec.ncells;
-      for (int z = lo[2]; z <= hi[2]; ++z) {
-        const float gz = g2[2][z - at[2] + 1];
-        for (int y = lo[1]; y <= hi[1]; ++y) {
-          const float gzy = gz + g2[1][y - at[1] + 1];
+      for (int oz = lo[2]; oz <= hi[2]; ++oz) {
+        const float gz = g2[2][oz + 1];
+        int z = at[2] + oz;
+        z = z < 0 ? z + dim[2] : (z >= dim[2] ? z - dim[2] : z);
+        for (int oy = lo[1]; oy <= hi[1]; ++oy) {
+          const float gzy = gz + g2[1][oy + 1];
           if (kCull && gzy > lim) continue;
+          int y = at[1] + oy;
+          y = y < 0 ? y + dim[1] : (y >= dim[1] ? y - dim[1] : y);
           int x0 = lo[0], x1 = hi[0];
-          if (kCull && x0 < at[0] && gzy + g2[0][0] > lim) x0 = at[0];
-          if (kCull && x1 > at[0] && gzy + g2[0][2] > lim) x1 = at[0];
-          f(tbase + uint64_t(z) * dxy + uint64_t(y) * dx, x0, x1, t);
+          if (kCull && x0 < 0 && gzy + g2[0][0] > lim) x0 = 0;
+          if (kCull && x1 > 0 && gzy + g2[0][2] > lim) x1 = 0;
+          const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
+          const int a = at[0] + x0, b = at[0] + x1;
+          if (wraps[0] && a < 0) {  // the row wraps below: the last cell, then from the first
+            f(row, dim[0] - 1, dim[0] - 1, t);
+            f(row, 0, b, t);
+          } else if (wraps[0] && b >= dim[0]) {  // ... above: to the last cell, then the first
+            f(row, a, dim[0] - 1, t);
+            f(row, 0, 0, t);
+          } else {
+            f(row, a, b, t);
+          }
         }
       }
     }
@@ -347,7 +385,7 @@ struct CellGridView {
     for_each_cell_range(i, xi, [&](uint32_t s, const uint32_t e) {
       if (kPairs && s <= uint32_t(i)) s = uint32_t(i) + 1u;
       for (uint32_t j = s; j < e; ++j) {
-        Vec<D> d = xi - pos[j];
+        Vec<D> d = spec.per.displacement(xi - pos[j]);
         float rr = norm2(d);
         if (rr < r2) visit(int(j), d, rr);
       }

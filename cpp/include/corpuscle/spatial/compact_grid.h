@@ -78,47 +78,33 @@ struct CompactTiledGatherFn {
         acc[l] = stage.begin(s0 + l);
       }
     });
-    // the cell of the chunk (that of each of its particles), and its neighbour range
-    int cc[D];
-    g.spec.cell_of(g.pos[s0], cc);
-    int lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-    for (int k = 0; k < D; ++k) {
-      lo[k] = cc[k] > 0 ? cc[k] - 1 : 0;
-      hi[k] = cc[k] + 1 < g.spec.dims[k] ? cc[k] + 1 : g.spec.dims[k] - 1;
-    }
-    const uint64_t dx = uint64_t(g.spec.dims[0]);
-    const uint64_t dxy = D == 3 ? dx * uint64_t(g.spec.dims[1]) : 0;
+    // the cells around the chunk's cell (that of each of its particles; the grid's block, in
+    // its order, wrapping across periodic faces)
     int t1 = g.tag_end;
     if (view.split >= 0 && g.spec.tag_of_key(g.key(s0)) >= view.split) t1 = view.split < t1 ? view.split : t1;
-    for (int tag = g.tag_begin; tag < t1; ++tag) {
-      const uint64_t tbase = uint64_t(tag) * g.spec.ncells;
-      for (int z = lo[2]; z <= hi[2]; ++z) {
-        for (int y = lo[1]; y <= hi[1]; ++y) {
-          const uint64_t row = tbase + uint64_t(z) * dxy + uint64_t(y) * dx;
-          for (int x = lo[0]; x <= hi[0]; ++x) {
-            const uint64_t slot = row + uint64_t(x);
-            const int s = int(g.cell_start[slot]), e = int(g.cell_end[slot]);
-            // the cell's particles in batches of K through shared memory
-            for (int base = s; base < e; base += K) {
-              const int m = e - base < K ? e - base : K;
-              t.lanes([&](int l) {
-                if (l < m) sh[l] = g.pos[base + l];
-              });
-              t.sync();
-              t.lanes([&](int l) {
-                if (l >= m0) return;
-                for (int k = 0; k < m; ++k) {
-                  Vec<D> d = xi[l] - sh[k];
-                  float rr = norm2(d);
-                  if (rr < g.r2) stage.visit(acc[l], s0 + l, base + k, d, rr);
-                }
-              });
-              t.sync();
+    g.template block_rows<false>(g.pos[s0], g.tag_begin, t1, [&](uint64_t row, int x0, int x1, int) {
+      for (int x = x0; x <= x1; ++x) {
+        const uint64_t slot = row + uint64_t(x);
+        const int s = int(g.cell_start[slot]), e = int(g.cell_end[slot]);
+        // the cell's particles in batches of K through shared memory
+        for (int base = s; base < e; base += K) {
+          const int m = e - base < K ? e - base : K;
+          t.lanes([&](int l) {
+            if (l < m) sh[l] = g.pos[base + l];
+          });
+          t.sync();
+          t.lanes([&](int l) {
+            if (l >= m0) return;
+            for (int k = 0; k < m; ++k) {
+              Vec<D> d = g.spec.per.displacement(xi[l] - sh[k]);
+              float rr = norm2(d);
+              if (rr < g.r2) stage.visit(acc[l], s0 + l, base + k, d, rr);
             }
-          }
+          });
+          t.sync();
         }
       }
-    }
+    });
     t.lanes([&](int l) {
       if (l < m0) stage.end(s0 + l, acc[l]);
     });

@@ -35,6 +35,7 @@
 #include "corpuscle/core/lanes.h"
 #include "corpuscle/spatial/index.h"
 #include "corpuscle/spatial/lane_walks.h"
+#include "corpuscle/spatial/periodic.h"
 
 namespace cps {
 
@@ -188,6 +189,7 @@ struct SlotListView {
   size_t stride = 0;
   float r2 = 0.0f;           // squared query radius
   float list_radius = 0.0f;  // the radius the lists were built with
+  Periodic<D> per;           // periodic axes: the walk's displacement is the minimum image
 
   CPS_HD int size() const { return n; }
   CPS_HD bool active(int) const { return true; }
@@ -248,7 +250,7 @@ struct SlotListView {
         k += kWidth;
         e += step;
         if (kPairs && jj <= i) continue;
-        d = xi - xj;
+        d = per.displacement(xi - xj);
         rr = norm2(d);
         if (rr < r2) {
           j = jj;
@@ -305,7 +307,7 @@ struct SlotListFillFn {
         for (uint32_t b = s; b < end; b += uint32_t(W)) {
           const uint32_t j = b + uint32_t(L.lane());
           bool hit = false;
-          if (j < end && j != uint32_t(i)) hit = norm2(xi - src.pos[j]) < src.r2;
+          if (j < end && j != uint32_t(i)) hit = norm2(src.spec.per.displacement(xi - src.pos[j])) < src.r2;
           const unsigned m = L.group_ballot(hit);
           if (hit) {
             const int at = c + __popc(m & below);
@@ -371,7 +373,7 @@ class SlotNeighborList {
 
   // the lists over positions `pos` (numbered like the source's slots; slot i's at
   // pos[i * pos_stride]), queried with radius (at most the list radius)
-  SlotListView<D> view(const VecA<D>* pos, float radius, int pos_stride = 1) const {
+  SlotListView<D> view(const VecA<D>* pos, float radius, int pos_stride = 1, const Periodic<D>& per = {}) const {
     if (radius > list_radius_)
       throw Error("neighbour list: a query radius of " + std::to_string(radius) + " exceeds the list radius " +
                   std::to_string(list_radius_));
@@ -385,6 +387,7 @@ class SlotNeighborList {
     v.stride = stride_;
     v.r2 = radius * radius;
     v.list_radius = list_radius_;
+    v.per = per;
     return v;
   }
 

@@ -88,6 +88,12 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   m.c0 = p.f("c0");
   m.gamma = p.f("gamma");
   m.B = tait_stiffness(m.c0, m.rho0, m.gamma);
+  m.shift_a = p.has("shifting") ? p.f("shifting") : 0.0f;
+  if (!(m.shift_a >= 0.0f) || !finite(m.shift_a))
+    throw Error(std::string(kind) + ": shifting must be finite and >= 0, got " + std::to_string(m.shift_a));
+  m.p_back = p.has("background_pressure") ? p.f("background_pressure") : 0.0f;
+  if (!(m.p_back >= 0.0f) || !finite(m.p_back))
+    throw Error(std::string(kind) + ": background_pressure must be finite and >= 0, got " + std::to_string(m.p_back));
   m.viscosity = int(p.integer("viscosity"));
   if (m.viscosity != kArtificialViscosity && m.viscosity != kLaminarViscosity)
     throw Error(std::string(kind) + ": viscosity must be 0 (artificial) or 1 (laminar)");
@@ -96,7 +102,8 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   const long long diffusion = p.integer("diffusion");
   const float delta = p.f("delta");
   const Vec<D> g = vecd<D>(p, "gravity", kind);
-  const float gmag = norm(g);
+  const float gmag = g[D - 1] < 0.0f ? -g[D - 1] : g[D - 1];  // (the vertical: a body force along another axis
+                                                              // is no hydrostatic head for the diffusion)
   if (diffusion == 0) m.dd = DensityDiffusion::none();
   else if (diffusion == 1) m.dd = DensityDiffusion::molteni(delta, m.hs, m.c0);
   else if (diffusion == 2) m.dd = DensityDiffusion::fourtakas(delta, m.hs, m.c0, m.rho0, m.gamma, gmag);
@@ -114,6 +121,13 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   m.hi = vecd<D>(p, "box_hi", kind);
   m.domain_lo = vecd<D>(p, "domain_lo", kind);
   m.domain_hi = vecd<D>(p, "domain_hi", kind);
+  const long long periodic = p.has("periodic") ? p.integer("periodic") : 0;
+  if (periodic < 0 || periodic >= (1LL << D))
+    throw Error(std::string(kind) + ": periodic must be a mask of the " + std::to_string(D) + " axes, got " + std::to_string(periodic));
+  m.per = Periodic<D>::make(unsigned(periodic), m.domain_lo, m.domain_hi);
+  for (int k = 0; k < D; ++k)
+    if (m.per.on(k) && (m.domain_lo[k] != m.lo[k] || m.domain_hi[k] != m.hi[k]))
+      throw Error(std::string(kind) + ": a periodic axis's domain must be the box (no wall layers across it)");
   // the lists index's parameters (other indexes: list_radius = h, unused)
   m.list_radius = p.has("list_radius") ? p.f("list_radius") : m.h;
   const float rebuild = p.has("rebuild_distance") ? p.f("rebuild_distance") : 0.0f;
@@ -161,6 +175,13 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
       throw Error(kind + ": the initial " + w.name + " array must be (" + std::to_string(w.count) + ", " +
                   std::to_string(w.comps) + ")");
     if (w.count > 0) sim->upload(w.name, a.data, a.count);
+  }
+  // moving walls (a lid): the wall particles' prescribed velocity (zero where not given)
+  if (r.arrays && r.arrays->has("wall_velocity") && m->n_wall > 0) {
+    ArrayView a = r.arrays->get("wall_velocity");
+    if (a.components != D || a.count != m->n_wall)
+      throw Error(kind + ": the initial wall_velocity array must be (" + std::to_string(m->n_wall) + ", " + std::to_string(D) + ")");
+    sim->upload("wall_velocity", a.data, a.count);
   }
   return sim;
 }

@@ -26,6 +26,7 @@
 #include "corpuscle/physics/timestep.h"
 #include "corpuscle/sim/table.h"
 #include "corpuscle/spatial/cell_grid.h"
+#include "corpuscle/spatial/periodic.h"
 
 namespace cps::sph {
 
@@ -60,6 +61,22 @@ struct Model {
   Vec<D> gravity;
   Vec<D> lo, hi;            // the box the fluid is held in (the walls' inner faces)
   Vec<D> domain_lo, domain_hi;  // the box with its wall layers (the cell grid's domain)
+  // periodic axes (`boundary.periodic`): no walls across them, the domain's extent along them
+  // (the box's) is the period; every index finds neighbours by the minimum image and the
+  // integration wraps the positions (spatial/periodic.h)
+  Periodic<D> per;
+  // a background pressure added in the pressure gradient only (`fluid.background_pressure`;
+  // 0 by default): a constant that keeps the pressure positive where the flow's own is
+  // negative (a vortex's core), so the pair forces stay repulsive and the particles do not
+  // clump (the tensile instability; Morris et al. 1997, Adami et al. 2013). The pressure
+  // fields and probes report the equation of state's p without it.
+  float p_back;
+  // particle shifting (`sph.shifting` = A; 0: off, the default): each step a fluid particle
+  // moves by -A hs |v| dt grad C, C = sum_j V_j W_ij its neighbours' volume fraction (Skillen
+  // et al. 2013 as DualSPHysics has it; Lind et al. 2012), which keeps the particles evenly
+  // spread where the flow stretches them (a vortex), with no free surface in the box. For the
+  // canonical flows (periodic, closed boxes); the free-surface correction is not made.
+  float shift_a;
   // the `lists` index: slot lists within list_radius = h (1 + skin), built on the steps that
   // sort and reused until a particle has moved more than skin h / 2 since (rebuild_disp2 is
   // that distance squared); max_neighbors entries per slot (grown on overflow). Other

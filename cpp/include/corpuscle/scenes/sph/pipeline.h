@@ -72,6 +72,11 @@ struct DamBreak2Kind {
   static constexpr int D = 2;
   static constexpr const char* name = "dam-break-2d";
 };
+// the 2-D box of the canonical flows (Taylor-Green, Poiseuille, the lid-driven cavity)
+struct FluidBox2Kind {
+  static constexpr int D = 2;
+  static constexpr const char* name = "fluid-box-2d";
+};
 
 // the `lists` pair pass's lanes per particle when the scene does not say (sph.lanes = 0): the
 // CPU one; CUDA the fewest lanes (a power of two, at most kMaxAutoListLanes) that give lanes x
@@ -121,7 +126,7 @@ class Pipeline {
   // rows: a walk reads each row of its block (three cells) as one range
   static CellGridSpec<D> grid_spec(const ModelT& m) {
     return make_cell_grid<D>(m.domain_lo, m.domain_hi, kLists ? m.list_radius : m.h, 2, kCellGridMaxCells,
-                             CellOrder::Rows);
+                             CellOrder::Rows, m.per.mask);
   }
 
   static double bytes_needed(const ModelT& m) {
@@ -266,7 +271,7 @@ class Pipeline {
     // 3. the probes of this state (the grid's walk; all pairs for that index)
     if (m_.n_probes > 0) {
       if constexpr (std::is_same_v<Index, AllPairsIndex>)
-        ex_.for_each(m_.n_probes, ProbeStage<D, AllPairsView<D>>{md, g, s, AllPairsView<D>{s.position, n_, m_.h * m_.h}, nf_});
+        ex_.for_each(m_.n_probes, ProbeStage<D, AllPairsView<D>>{md, g, s, AllPairsView<D>{s.position, n_, m_.h * m_.h, m_.per}, nf_});
       else  // (lists: the cells of the last build, of the list radius, hold every fluid particle within h)
         ex_.for_each(m_.n_probes, ProbeStage<D, CellGridView<D>>{md, g, s, kLists ? gv.with_radius(m_.h) : gv, nf_});
     }
@@ -314,11 +319,15 @@ class Pipeline {
       for (long long i = 0; i < count; ++i) ids[i] = int(off + i);
       ex_.to_device(fields_.id.cur(cur) + off, ids.data(), count * sizeof(int));
       if (wall) {
-        // the walls never move: their velocity is zero
+        // the walls never move: their velocity is zero (a moving wall's is set after, wall_velocity)
         std::vector<Vec<D>> zero(count, Vec<D>::zero());
         ex_.to_device(fields_.velocity.cur(cur) + off, zero.data(), count * sizeof(Vec<D>));
         ex_.to_device(fields_.velocity_prev.cur(cur) + off, zero.data(), count * sizeof(Vec<D>));
       }
+    } else if (name == "wall_velocity") {
+      // a moving wall's prescribed velocity (it enters the pair terms; the wall stays in place)
+      ex_.to_device(fields_.velocity.cur(cur) + off, src, count * sizeof(Vec<D>));
+      ex_.to_device(fields_.velocity_prev.cur(cur) + off, src, count * sizeof(Vec<D>));
     } else if (name == "velocity" || name == "velocity_prev") {
       // a velocity set is also the previous step's (a checkpoint's velocity_prev comes after)
       if (name == "velocity") ex_.to_device(fields_.velocity.cur(cur), src, count * sizeof(Vec<D>));
@@ -364,9 +373,9 @@ class Pipeline {
     if constexpr (kLists) {
       // (the walk reads the records' positions: the first member, a record apart)
       constexpr int stride = int(sizeof(PairRecord<D>) / sizeof(VecA<D>));
-      list_pass_lanes(lists_.view(reinterpret_cast<const VecA<D>*>(s.rec), m_.h, stride), st);
+      list_pass_lanes(lists_.view(reinterpret_cast<const VecA<D>*>(s.rec), m_.h, stride, m_.per), st);
     } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
-      AllPairsView<D> av{s.position, n_, m_.h * m_.h};
+      AllPairsView<D> av{s.position, n_, m_.h * m_.h, m_.per};
       if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
       else gather_stage(ex_, av, st);
     } else if constexpr (std::is_same_v<Index, CompactIndex>) {

@@ -39,7 +39,7 @@ struct ReorderStage {
     const Vec<D> v = a.velocity[o];
     PairVel pv;
     for (int k = 0; k < 3; ++k) pv.v[k] = k < D ? v[k] : 0.0f;
-    pv.pr2 = p / (rho * rho);
+    pv.pr2 = (p + model->p_back) / (rho * rho);  // (p_back: 0 unless fluid.background_pressure)
     VecA<D> x4 = VecA<D>::of(x);
     if constexpr (D == 3) x4.v[3] = rho;  // (the pair loop's rho_j: see InteractStage::visit)
     else a.pr[j] = PairRho{rho, model->mass / rho};
@@ -73,12 +73,14 @@ struct PairConsts {
   LaminarViscosity lv;
   DensityDiffusion dd;
   Vec<D> gravity;
+  int shifting;  // grad C accumulated (particle shifting on)
   static PairConsts make(const Model<D>& m) {
     // the terms were made from the same hs with the same expression (0.01f * hs * hs)
     if (m.av.eta2 != m.lv.eta2 || (m.dd.kind != DensityDiffusionKind::None && m.dd.eta2 != m.av.eta2) ||
         m.av.hs != m.hs)
       throw Error("sph: the pair terms' eta^2 or hs differ");
-    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.av.eta2, m.viscosity, m.av, m.lv, m.dd, m.gravity};
+    return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.av.eta2, m.viscosity, m.av, m.lv, m.dd, m.gravity,
+                      m.shift_a > 0.0f ? 1 : 0};
   }
 };
 
@@ -93,7 +95,7 @@ struct DefaultTerms {
   template <int D>
   static bool matches(const Model<D>& m) {
     return m.kernels.gradient.kind == SphKernelKind::WendlandC2 && m.viscosity == kArtificialViscosity &&
-           m.dd.kind == DensityDiffusionKind::Fourtakas;
+           m.dd.kind == DensityDiffusionKind::Fourtakas && !(m.shift_a > 0.0f);
   }
 };
 
@@ -112,6 +114,7 @@ struct InteractStage {
     int nbrs;
     Vec<D> vel_i;
     float rho_i, pr2_i;
+    Vec<D> gradc;  // sum_j V_j grad W_ij (particle shifting only)
   };
 
   CPS_HD Acc begin(int i) const {
@@ -123,6 +126,7 @@ struct InteractStage {
     s.vel_i = a.velocity[i];
     s.rho_i = a.density[i];
     s.pr2_i = a.rec[i].pv.pr2;
+    s.gradc = Vec<D>::zero();
     return s;
   }
 
@@ -136,9 +140,15 @@ struct InteractStage {
     if constexpr (Terms::kFixed) gw = KernelFormula<D, SphKernelKind::WendlandC2>::grad(m.kern.k, d, r);
     else gw = m.kern.grad(d, r);
     const PairVel pv = a.rec[j].pv;  // (one vector load, from the sector the walk loaded)
-    Vec<D> dv;
-    for (int k = 0; k < D; ++k) dv[k] = s.vel_i[k] - pv.v[k];
-    s.drho += m.mass * dot(dv, gw);
+    Vec<D> dv, dvc;
+    for (int k = 0; k < D; ++k) {
+      dv[k] = s.vel_i[k] - pv.v[k];
+      // the continuity equation sees the particles' motion: a wall particle's is zero (a moving
+      // wall's prescribed velocity, a lid sliding in its own plane, enters the viscous terms
+      // only; for walls at rest the same values)
+      dvc[k] = (fi ? s.vel_i[k] : 0.0f) - (fj ? pv.v[k] : 0.0f);
+    }
+    s.drho += m.mass * dot(dvc, gw);
     if (!fi) return;
     s.nbrs += 1;
     // rho_j and V_j = m / rho_j: in 3-D rho_j rides in the padding of j's position (a line the
@@ -154,6 +164,8 @@ struct InteractStage {
       rho_j = pr.rho;
       vol_j = pr.vol;
     }
+    if constexpr (!Terms::kFixed)
+      if (m.shifting) s.gradc += gw * vol_j;
     const float rho_i = s.rho_i;
     // 1 / (r^2 + eta^2) and v_ij . r_ij, once for every term (each term's eta^2 is the same
     // 0.01 hs^2, PairConsts::make: so this is the value each would compute)
@@ -183,6 +195,7 @@ struct InteractStage {
     a.drho += b.drho;
     a.mu_max = fmax2(a.mu_max, b.mu_max);
     a.nbrs += b.nbrs;
+    a.gradc += b.gradc;
   }
 
   CPS_HD void end(int i, Acc& s) const {
@@ -192,6 +205,7 @@ struct InteractStage {
       Vec<D> acc = s.acc + m.gravity;
       for (int k = 0; k < D; ++k) acc[k] += ctl->acc[k];
       a.acceleration[i] = acc;
+      if (m.shifting) a.shift_grad[i] = s.gradc;
       const Vec<D> v = s.vel_i;
       it.amax2 = norm2(acc);
       it.vmax2 = norm2(v);
@@ -379,6 +393,9 @@ struct IntegrateStage {
       v = euler ? v0 + acc * dt : a.velocity_prev[i] + acc * (2.0f * dt);
       x = a.position[i] + v0 * dt + acc * (0.5f * dt * dt);
     }
+    if (m.shift_a > 0.0f)  // particle shifting: -A hs |v| dt grad C
+      x -= a.shift_grad[i] * (m.shift_a * m.hs * fsqrt(norm2(v0)) * dt);
+    x = m.per.wrap(x);  // periodic axes: back into the box
     a.velocity_prev[i] = v0;
     a.density_prev[i] = rho0;
     a.velocity[i] = v;
@@ -391,8 +408,10 @@ struct IntegrateStage {
       sum += x[k] + v[k];
     }
     if (out) add_count(&g->outside, 1);
-    // `lists`: moved more than skin h / 2 since the build: the next step relists
-    if (a.x_build && norm2(x - a.x_build[i]) > m.rebuild_disp2 && g->rebuild == 0) atomic_max(&g->rebuild, 1);
+    // `lists`: moved more than skin h / 2 since the build (the minimum image across a periodic
+    // face): the next step relists
+    if (a.x_build && norm2(m.per.displacement(x - a.x_build[i])) > m.rebuild_disp2 && g->rebuild == 0)
+      atomic_max(&g->rebuild, 1);
     if (!finite(sum)) raise_first(&g->clock.bad, kBadParticles);
   }
 };

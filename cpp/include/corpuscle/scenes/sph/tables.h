@@ -16,7 +16,8 @@
   X(density_prev, float, 1, "fluid", true, false, false, true)       \
   X(pressure, float, 1, "fluid", false, false, true, false)          \
   X(acceleration, float, D, "fluid", false, false, false, false)     \
-  X(density_rate, float, 1, "fluid", false, false, false, false)
+  X(density_rate, float, 1, "fluid", false, false, false, false)     \
+  X(shift_grad, float, D, "fluid", false, false, false, false)
 
 // the wall particles' views of those buffers (slots [nf, nf + nw))
 // X(name, C type, components, group, checkpointed, settable, storage, count)
@@ -24,7 +25,8 @@
   X(wall_position, float, D, "wall", true, true, fields_.position.cur(cur) + nf, nw)          \
   X(wall_density, float, 1, "wall", true, true, fields_.density.cur(cur) + nf, nw)            \
   X(wall_density_prev, float, 1, "wall", true, false, fields_.density_prev.cur(cur) + nf, nw) \
-  X(wall_pressure, float, 1, "wall", false, false, fields_.pressure.cur(cur) + nf, nw)
+  X(wall_pressure, float, 1, "wall", false, false, fields_.pressure.cur(cur) + nf, nw)         \
+  X(wall_velocity, float, D, "wall", false, true, fields_.velocity.cur(cur) + nf, nw)
 
 // X(name, C type, count, member of Scene, checkpointed)
 #define CPS_SPH_SCALARS(X)                              \
