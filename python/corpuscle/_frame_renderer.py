@@ -188,6 +188,8 @@ class FrameRenderer:
                 pts.append(np.asarray(ob["points"], float)[:, :d])
             elif ob.get("type") == "box" and len(ob.get("min", ())) >= d:
                 pts.append(np.array([ob["min"], ob["max"]], float)[:, :d])
+            elif ob.get("type") == "mesh":
+                pts.append(np.asarray(ob["vertices"], float)[:, :d])
         allp = np.concatenate([p for p in pts if len(p)]) if any(len(p) for p in pts) else np.zeros((1, d))
         lo, hi = np.nanmin(allp, axis=0), np.nanmax(allp, axis=0)
         pad = 0.02 * float(np.max(hi - lo) or 1.0)
@@ -354,6 +356,17 @@ class FrameRenderer:
             if ob.get("type") == "box" and len(ob.get("min", ())) == 3:
                 lo, hi = np.asarray(ob["min"], float), np.asarray(ob["max"], float)
                 self._box_triangles(0.5 * (lo + hi), np.eye(3), 0.5 * (hi - lo), {}, tris, cols, OBSTACLE_FILL)
+        # triangle meshes (3-D bodies of the SPH box kinds): their faces toward the camera, lit
+        for ob in self.scene.obstacles:
+            if ob.get("type") == "mesh":
+                v = np.asarray(ob["vertices"], float)
+                t = v[np.asarray(ob["faces"], np.int64).reshape(-1, 3)]
+                n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+                for tri, nrm in zip(t, n):
+                    if self.camera.facing(tri.mean(axis=0), nrm):
+                        k = self._shade(nrm / max(float(np.linalg.norm(nrm)), 1e-300))
+                        tris.append(tri)
+                        cols.append(tuple(int(min(255, ch * k)) for ch in OBSTACLE_FILL))
         # extruded sections (3-D): an x-y polygon swept along z over its `extrude` range (the 3-D
         # wind tunnel's airfoil), turned as the frame's diagnostics say: lit sides and end caps
         for ob in self.scene.obstacles:

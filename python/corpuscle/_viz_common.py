@@ -284,6 +284,7 @@ def parse_size(spec: str | tuple[int, int], error: type[ValueError], lo: int = 1
 _OUTPUT_STARTS = {
     ".png": (b"\x89PNG\r\n\x1a\n",), ".gif": (b"GIF87a", b"GIF89a"), ".pdf": (b"%PDF",),
     ".svg": (b"<?xml", b"<svg"), ".json": (b"[", b"{"), ".csv": None,
+    ".md": (b"# Validation report",),  # `validate all`'s report (any other Markdown is someone's notes)
 }
 FORCE_OUTPUT = contextvars.ContextVar("corpuscle_force_output", default=False)
 
@@ -445,6 +446,16 @@ def _check_obstacle(ob: Any, k: int) -> dict:
         out["min"], out["max"] = lo, hi
         if len(lo) == 2 and ob.get("points") is None:
             out["points"] = [[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]
+    if ob.get("type") == "mesh":
+        # a triangle mesh (a [[bodies]] entry of the SPH box kinds): world vertices and faces
+        verts, faces = ob.get("vertices"), ob.get("faces")
+        if not isinstance(verts, list) or not isinstance(faces, list) or not verts:
+            raise HeaderError(f"run header: obstacles[{k}] (mesh) needs lists vertices and faces")
+        out["vertices"] = [_numbers(q, f"obstacles[{k}].vertices", 3, 3) for q in verts]
+        for f in faces:
+            if (not isinstance(f, list) or len(f) != 3
+                    or not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < len(verts) for i in f)):
+                raise HeaderError(f"run header: obstacles[{k}].faces must be triples of vertex indices, got {_short(f)}")
     if ob.get("points") is not None:
         pts = ob["points"]
         if not isinstance(pts, list):

@@ -176,6 +176,11 @@ def _obstacle_part(ob: dict, k: int) -> Part | None:
                           {"position": 0.5 * (lo + hi)}, 3)
         part.cell_data = {}
         return part
+    if ob.get("type") == "mesh":
+        v = np.asarray(ob["vertices"], float)
+        f = np.asarray(ob["faces"], np.int64).reshape(-1, 3)
+        return Part(f"obstacle_{ob.get('name', k)}", v, f.reshape(-1), np.arange(3, 3 * len(f) + 1, 3, dtype=np.int64),
+                    np.full(len(f), VTK_TRIANGLE, np.uint8))
     pts = ob.get("points")
     if pts is None or len(pts) < 3:
         return None

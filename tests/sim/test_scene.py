@@ -375,8 +375,8 @@ def test_directory_given(tmp_path):
 def test_unknown_scene():
     with pytest.raises(SceneError) as e:
         load_scene("foo")
-    assert str(e.value) == ("unknown scene 'foo' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, fluid-box, "
-                            "magic8ball, wind-tunnel, wind-tunnel-3d)")
+    assert str(e.value) == ("unknown scene 'foo' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, "
+                            "dam-break-obstacle, fluid-box, magic8ball, wind-tunnel, wind-tunnel-3d)")
 
 
 def test_unknown_scene_did_you_mean():

@@ -209,8 +209,8 @@ struct CpuExec {
 
   // f(i) returns item i's T; op over the n items from init (op's identity) into *out, then fin(0):
   // reduce()'s chunks and order (so the same result as over stored items, bit for bit),
-  // without storing them
-  template <class F, class T, class Op, class Fin>
+  // without storing them (kMinBlocks: the CUDA backend's launch bounds)
+  template <int kMinBlocks = 0, class F, class T, class Op, class Fin>
   void for_each_reduce_then(int n, const F& f, T* out, Op op, T init, const Fin& fin) const {
     reduce_items(n, f, out, op, init);
     fin(0);

@@ -117,8 +117,8 @@ __global__ void __launch_bounds__(kThreads) k_for_each_warp_reduce_then(int n, F
 // *out and runs fin on it: the items are never stored, and the result depends on n and the
 // grid only (the same on every run of one device)
 template <class F, class T, class Op, class Fin, int kThreads>
-__global__ void __launch_bounds__(kThreads) k_for_each_reduce_then(int n, F f, T* partials, T* out, Op op, T init,
-                                                                   Fin fin, unsigned* counter) {
+__device__ __forceinline__ void for_each_reduce_then_body(int n, F f, T* partials, T* out, Op op, T init,
+                                                          Fin fin, unsigned* counter) {
   using BlockReduce = cub::BlockReduce<T, kThreads>;
   __shared__ typename BlockReduce::TempStorage tmp;
   T acc = init;
@@ -128,6 +128,19 @@ __global__ void __launch_bounds__(kThreads) k_for_each_reduce_then(int n, F f, T
   if (threadIdx.x == 0) partials[blockIdx.x] = r;
   if (block_arrives_last(counter))
     last_block_reduce_then<T, Op, Fin, kThreads>(partials, int(gridDim.x), out, op, init, fin, counter);
+}
+template <class F, class T, class Op, class Fin, int kThreads>
+__global__ void __launch_bounds__(kThreads) k_for_each_reduce_then(int n, F f, T* partials, T* out, Op op, T init,
+                                                                   Fin fin, unsigned* counter) {
+  for_each_reduce_then_body<F, T, Op, Fin, kThreads>(n, f, partials, out, op, init, fin, counter);
+}
+// the same with at least kMinBlocks blocks resident per multiprocessor: the registers a thread
+// may use are 64 K / (kThreads kMinBlocks) (a stage the compiler's own choice would make spill)
+template <class F, class T, class Op, class Fin, int kThreads, int kMinBlocks>
+__global__ void __launch_bounds__(kThreads, kMinBlocks) k_for_each_reduce_then_bounded(int n, F f, T* partials, T* out,
+                                                                                    Op op, T init, Fin fin,
+                                                                                    unsigned* counter) {
+  for_each_reduce_then_body<F, T, Op, Fin, kThreads>(n, f, partials, out, op, init, fin, counter);
 }
 
 #if CUDART_VERSION >= 13000
@@ -471,12 +484,15 @@ struct CudaExec {
   // f(i) returns item i's T for i in [0, n); op over the items from init (op's identity) into *out, then
   // fin(0), in one kernel that never stores the items (k_for_each_reduce_then): as many
   // blocks as the device holds at once, so the last block's reduction of their partials is short
+  // (kMinBlocks > 0: launch bounds of that many blocks per multiprocessor, as for_each_bounded)
   static constexpr int kFusedThreads = 256;
-  template <class F, class T, class Op, class Fin>
+  template <int kMinBlocks = 0, class F, class T, class Op, class Fin>
   void for_each_reduce_then(int n, const F& f, T* out, Op op, T init, const Fin& fin) {
     activate();
     using K = decltype(&k_for_each_reduce_then<F, T, Op, Fin, kFusedThreads>);
-    const K kernel = &k_for_each_reduce_then<F, T, Op, Fin, kFusedThreads>;
+    K kernel;
+    if constexpr (kMinBlocks > 0) kernel = &k_for_each_reduce_then_bounded<F, T, Op, Fin, kFusedThreads, kMinBlocks>;
+    else kernel = &k_for_each_reduce_then<F, T, Op, Fin, kFusedThreads>;
     // resident blocks per multiprocessor, once per kernel and device (not a stream operation:
     // allowed while a graph is captured)
     static std::atomic<int> resident[kMaxDevices] = {};

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..schema import INT64_MAX, CrossCheck, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
+from ._sph_bodies import MAX_BODIES, body_keys, build_bodies, check_bodies, header_obstacles
 
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
 VISCOSITIES = {"artificial": 0, "laminar": 1}
@@ -263,11 +264,17 @@ class SphBox(Kind):
         hs = smoothing * dp
         h = 2.0 * hs
         layers = int(math.ceil(h / dp - 1e-6))
-        nf_est = int(np.prod(f1 - f0))
         # periodic axes: no wall layers across them (the walls of the other axes span the period)
         periodic = np.array(["xyz"[k] in v["boundary.periodic"] for k in range(D)])
         wall_layers = np.where(periodic, 0, layers)
-        box_cells = int(np.prod(nb + 2 * wall_layers) - np.prod(nb))
+        # [[bodies]]: their boundary particles join the walls; no fluid inside them (_sph_bodies.py)
+        fluid_pts = lattice(f0, f1, dp)
+        bodies, body_pts, _, clear = build_bodies(scene.arrays, D, dp, layers, fluid_pts)
+        fluid_pts = fluid_pts[clear]
+        nf_est = len(fluid_pts)
+        if nf_est == 0:
+            raise SceneError("bodies: the bodies fill the whole fluid block (no fluid is left)")
+        box_cells = int(np.prod(nb + 2 * wall_layers) - np.prod(nb)) + len(body_pts)
         if nf_est + box_cells > 2**31 - 1:
             raise SceneError(f"{key_values(scene, ('fluid.particles', 'fluid.spacing'))}: "
                              f"{nf_est + box_cells} particles, more than 2^31 - 1")
@@ -316,13 +323,13 @@ class SphBox(Kind):
         # the walls: every lattice point of the box widened by `layers` that is not inside it
         pts = lattice(-wall_layers, nb + wall_layers, dp)
         inside = np.all((pts > 0.0) & (pts < box_hi), axis=1)
-        wall = pts[~inside]
+        wall = np.concatenate([pts[~inside], body_pts]) if len(body_pts) else pts[~inside]
         wall_vel = self._wall_velocity(v, wall, box_hi)
         top = float(f1[-1] * dp)
         near = np.all((wall[:, :-1] > (f0[:-1] - layers) * dp) & (wall[:, :-1] < (f1[:-1] + layers) * dp), axis=1)
         wall_rho = np.where(near, hydrostatic_density(top - wall[:, -1], rho0, B, gamma, g), rho0)
         if checkpoint is None:
-            pos = lattice(f0, f1, dp)
+            pos = fluid_pts
             vel = np.zeros_like(pos)
             rho = hydrostatic_density(top - pos[:, -1], rho0, B, gamma, g)
             if v["flow.initial"] == "taylor-green":
@@ -351,7 +358,8 @@ class SphBox(Kind):
                 "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D),
                 "periodic": [a for a in "xyz"[:D] if a in v["boundary.periodic"]],
                 "moving_walls": list(v["walls.moving"]), "wall_speed": list(map(float, v["walls.velocity"])),
-                "body_force": list(map(float, v["fluid.body_force"]))}
+                "body_force": list(map(float, v["fluid.body_force"])),
+                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies)}
         info.update(self.extra_info(v, info))
         return Build(params, arrays, info)
 
@@ -463,7 +471,7 @@ class SphBox(Kind):
     def header(self, sim) -> dict[str, Any]:
         p = sim.params
         return {"container": {"type": "box", "min": list(p["box_lo"]), "max": list(p["box_hi"])},
-                "obstacles": [], "bodies": [], "particles": sim.info["n_fluid"], "wall_particles": sim.info["n_wall"],
+                "obstacles": list(sim.info.get("obstacles", [])), "bodies": [], "particles": sim.info["n_fluid"], "wall_particles": sim.info["n_wall"],
                 "spacing": sim.info["spacing"], "h": sim.info["h"], "particle_radius": 0.5 * sim.info["spacing"],
                 "probes": {n: sim.info["probe_positions"][k].tolist() for k, n in enumerate(sim.info["probe_names"])},
                 "units": dict(self.units)}
@@ -529,9 +537,11 @@ def _finite(x) -> bool:
 def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int, checks=(), *,
                 box: Callable[[dict[str, Any]], Any]) -> SceneKind:
     """The kind's schema; ``box(values)`` is the tank's inner size (what probes must lie in)."""
-    return SceneKind(name=name, description=description, keys=keys, arrays={"probes": probe_keys(dim)},
-                     required_in_arrays={"probes": ("name", "position")},
-                     max_in_arrays={"probes": 64},  # kMaxProbes of scenes/sph/model.h
+    return SceneKind(name=name, description=description, keys=keys,
+                     arrays={"probes": probe_keys(dim), "bodies": body_keys(dim)},
+                     required_in_arrays={"probes": ("name", "position"), "bodies": ("shape",)},
+                     max_in_arrays={"probes": 64,  # kMaxProbes of scenes/sph/model.h
+                                    "bodies": MAX_BODIES},
                      checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_lanes, *checks,
-                             _probes_inside(box), _check_boundaries(dim)])
+                             _probes_inside(box), _check_boundaries(dim), check_bodies(box, dim)])
 

@@ -81,6 +81,11 @@ void sort_and_reorder(Exec& ex, const SoftSpheres<D>& m, CellGrid<D, Exec>& grid
 // with the per-scene finalize (`finalize`, the finalize hook; integrate only): fused into the
 // contact pass (Exec::for_each_reduce_then) but for the tree, whose walks need shared memory
 // (the items are stored in `items` and reduced after). m: the host's model, md: the backend's.
+// the fused contact pass's blocks of 256 threads per multiprocessor on CUDA (launch bounds):
+// left to itself the compiler keeps the wind tunnel's pass at 64 registers and spills 128 bytes
+// a thread; 3 blocks leave it 80 registers and no spills (sm_90, nvcc 13)
+constexpr int kContactBlocksPerSM = 3;
+
 template <class Index, int D, class Exec, class Record, class Sums, class Boundary, class Finalize>
 void contacts_and_sums(Exec& ex, const SoftSpheres<D>& m, const SoftSpheres<D>* md, Record* g, const Arrays<D>& s,
                        Sums* items, CellGrid<D, Exec>& grid, Lbvh<D, Exec>& tree, const Boundary& boundary,
@@ -109,11 +114,11 @@ void contacts_and_sums(Exec& ex, const SoftSpheres<D>& m, const SoftSpheres<D>* 
     } else {
       // the forces and the step's sums in one pass: the sums items are never stored
       if (integrate)
-        ex.for_each_reduce_then(n, EvalOf<Force>{force}, &g->pending, CombineSums<Sums>{}, Sums::identity(),
-                                fin);
+        ex.template for_each_reduce_then<kContactBlocksPerSM>(n, EvalOf<Force>{force}, &g->pending,
+                                                              CombineSums<Sums>{}, Sums::identity(), fin);
       else
-        ex.for_each_reduce_then(n, EvalOf<Force>{force}, &g->sums, CombineSums<Sums>{}, Sums::identity(),
-                                NoFinalize{});
+        ex.template for_each_reduce_then<kContactBlocksPerSM>(n, EvalOf<Force>{force}, &g->sums,
+                                                              CombineSums<Sums>{}, Sums::identity(), NoFinalize{});
       ex.mark(3);
     }
     ex.mark(4);

@@ -189,6 +189,15 @@
         const pts = ob.points.map(pad3), n = pts.length;
         for (let i = 0; i < n; i++) o.lines.push(...pts[i], ...pts[(i + 1) % n]);
         if (ob.points[0].length === 2 || S.dim === 2) triangulate(pts).forEach((p) => o.fill.push(p[0], p[1], 0));
+      } else if (ob.type === 'mesh' && Array.isArray(ob.vertices) && Array.isArray(ob.faces)) {
+        // a triangle mesh (a body of the SPH box kinds): each edge once
+        const seen = new Set(), V = ob.vertices.map(pad3);
+        for (const f of ob.faces) for (let e = 0; e < 3; e++) {
+          const a = f[e], b = f[(e + 1) % 3], key = a < b ? `${a},${b}` : `${b},${a}`;
+          if (seen.has(key) || !V[a] || !V[b]) continue;
+          seen.add(key);
+          o.lines.push(...V[a], ...V[b]);
+        }
       } else if (ob.type === 'box' && ob.min && ob.max) {
         boxEdges(pad3(ob.min), pad3(ob.max), (p) => p).forEach((p) => o.lines.push(...p));
       } else if ((ob.type === 'sphere' || ob.type === 'circle') && ob.radius > 0) {
