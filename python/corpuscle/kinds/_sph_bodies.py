@@ -208,15 +208,23 @@ def moving_arrays(motions: list, owner: np.ndarray, body_pts: np.ndarray, n_wall
     return {"n_moving": len(index), "body_motion": numbers}, arrays, index
 
 
-def header_obstacles(bodies: list) -> list[dict[str, Any]]:
+def header_obstacles(bodies: list, motions: list | None = None) -> list[dict[str, Any]]:
     """The bodies as the run header's obstacles (render, live and export draw them): an
     unrotated 3-D box as a box, a 2-D body as its outline polygon, any other 3-D body as its
-    triangles (``type = "mesh"``: ``vertices``, ``faces``)."""
+    triangles (``type = "mesh"``: ``vertices``, ``faces``). A moving 2-D body's polygon adds
+    ``pose``: the diagnostics of its pose in each frame (body_<name>_x, ...), its reference
+    point and rotation at t = 0 (what its points are given at)."""
     out = []
-    for b in bodies:
+    motions = motions or [None] * len(bodies)
+    for b, m in zip(bodies, motions):
         v, f = geometry.surface_mesh(b)
         if b.dim == 2:
-            out.append({"name": b.name, "type": "polygon", "points": np.round(v, 9).tolist()})
+            ob = {"name": b.name, "type": "polygon", "points": np.round(v, 9).tolist()}
+            if m is not None:
+                c, R, _, _ = m.pose(0.0)
+                ob["pose"] = {"diagnostic": f"body_{b.name}", "origin": c[:2].tolist(),
+                              "rotation": R[:2, :2].tolist()}
+            out.append(ob)
         elif b.shape == "box" and np.allclose(b.rotation, np.eye(3)):
             lo, hi = b.bounds()
             out.append({"name": b.name, "type": "box", "min": lo.tolist(), "max": hi.tolist()})

@@ -363,7 +363,7 @@ class SphBox(Kind):
                 "periodic": [a for a in "xyz"[:D] if a in v["boundary.periodic"]],
                 "moving_walls": list(v["walls.moving"]), "wall_speed": list(map(float, v["walls.velocity"])),
                 "body_force": list(map(float, v["fluid.body_force"])),
-                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies),
+                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies, motions),
                 "moving_bodies": [bodies[k].name for k in moving_index], "moving_obstacles": moving_index}
         info.update(self.extra_info(v, info))
         return Build(params, arrays, info)

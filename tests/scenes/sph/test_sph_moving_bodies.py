@@ -252,3 +252,29 @@ def test_cuda_matches_cpu_with_moving_bodies(neighbors):
     # the bodies' particles: the same pose at (almost) the same time
     np.testing.assert_allclose(Xg, Xc, rtol=0, atol=1e-3 * dp)
     np.testing.assert_allclose(Vg, Vc, rtol=0, atol=1e-3)
+
+
+def test_frames_draw_a_moving_body_at_its_pose(tmp_path):
+    import corpuscle as cps
+    from corpuscle._viz_common import scene_info, turned_points
+    out = tmp_path / "p.cps"
+    proc = corpuscle_cli_run(out)
+    assert proc.returncode == 0, proc.stderr
+    with cps.open(out) as run:
+        ob = scene_info(run.header)["obstacles"][0]
+        assert ob["pose"]["diagnostic"] == "body_piston"
+        frames = list(run)
+        assert len(frames) >= 3
+        for fr in frames:
+            pts = turned_points(ob, fr.diagnostics)
+            # the plate's outline centred on the recorded reference point, unrotated
+            np.testing.assert_allclose(pts.mean(axis=0), [fr.diagnostics["body_piston_x"], 0.18], atol=1e-6)
+        assert frames[-1].diagnostics["body_piston_x"] != frames[0].diagnostics["body_piston_x"]
+    pytest.importorskip("PIL")
+    proc = corpuscle("render", out, "--out", tmp_path / "f.png", timeout=300)
+    assert proc.returncode == 0, proc.stderr
+
+
+def corpuscle_cli_run(out):
+    return corpuscle("run", "piston-wave-maker", "--backend", "serial", "--set", "fluid.particles=600",
+                     "--set", "run.end_time=0.3", "--set", "run.record_every=200", "--out", out, timeout=300)
