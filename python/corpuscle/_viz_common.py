@@ -499,6 +499,19 @@ def turned_points(ob: dict, diagnostics: dict | None):
     return out
 
 
+def posed_vertices(ob: dict, diagnostics: dict | None):
+    """A mesh obstacle's vertices (n, 3) as a frame shows them: at the frame's pose when the
+    obstacle has a ``pose`` (a moving body) and the frame its diagnostics, else as given."""
+    import numpy as np
+
+    v = np.asarray(ob["vertices"], dtype=np.float64)
+    pose = ob.get("pose") if isinstance(ob.get("pose"), dict) else None
+    if pose is None or not diagnostics:
+        return v
+    moved = _posed_points(v, pose, diagnostics)
+    return v if moved is None else moved
+
+
 def _posed_points(p, pose: dict, diagnostics: dict):
     """A moving body's points (given at its pose of t = 0: reference point ``pose.origin``,
     rotation ``pose.rotation``, D x D) at a frame's pose: its diagnostics ``<pose.diagnostic>_x``,

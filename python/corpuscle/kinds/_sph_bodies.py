@@ -211,9 +211,10 @@ def moving_arrays(motions: list, owner: np.ndarray, body_pts: np.ndarray, n_wall
 def header_obstacles(bodies: list, motions: list | None = None) -> list[dict[str, Any]]:
     """The bodies as the run header's obstacles (render, live and export draw them): an
     unrotated 3-D box as a box, a 2-D body as its outline polygon, any other 3-D body as its
-    triangles (``type = "mesh"``: ``vertices``, ``faces``). A moving 2-D body's polygon adds
-    ``pose``: the diagnostics of its pose in each frame (body_<name>_x, ...), its reference
-    point and rotation at t = 0 (what its points are given at)."""
+    triangles (``type = "mesh"``: ``vertices``, ``faces``). A moving body (a 2-D polygon, a
+    3-D body always as its triangles) adds ``pose``: the diagnostics of its pose in each frame
+    (body_<name>_x, ...), its reference point and rotation at t = 0 (what its points are
+    given at)."""
     out = []
     motions = motions or [None] * len(bodies)
     for b, m in zip(bodies, motions):
@@ -225,6 +226,11 @@ def header_obstacles(bodies: list, motions: list | None = None) -> list[dict[str
                 ob["pose"] = {"diagnostic": f"body_{b.name}", "origin": c[:2].tolist(),
                               "rotation": R[:2, :2].tolist()}
             out.append(ob)
+        elif m is not None:  # a moving 3-D body: its triangles at t = 0 and its pose
+            c, R, _, _ = m.pose(0.0)
+            out.append({"name": b.name, "type": "mesh", "vertices": np.round(v, 9).tolist(),
+                        "faces": np.asarray(f, np.int64).tolist(),
+                        "pose": {"diagnostic": f"body_{b.name}", "origin": c.tolist(), "rotation": R.tolist()}})
         elif b.shape == "box" and np.allclose(b.rotation, np.eye(3)):
             lo, hi = b.bounds()
             out.append({"name": b.name, "type": "box", "min": lo.tolist(), "max": hi.tolist()})

@@ -138,6 +138,13 @@ def test_table_motion_follows_its_table_in_3d(tmp_path, neighbors):
     assert seen >= 3 and sim.time > t[-1]  # (past the table's end: held at its last row, at rest)
     X, V = by_build(sim)
     assert not np.any(V[m])
+    # the header's obstacle: its triangles at t = 0 and its pose, drawn at a frame's pose
+    from corpuscle._viz_common import posed_vertices
+    ob = sim.header()["obstacles"][0]
+    assert ob["type"] == "mesh" and ob["pose"]["diagnostic"] == "body_bar"
+    v0 = np.asarray(ob["vertices"])
+    c, R, _, _ = table_pose(table, sim.time)
+    np.testing.assert_allclose(posed_vertices(ob, sim.diagnostics()), c + (v0 - c0) @ R0 @ R.T, atol=1e-5)
 
 
 def test_the_moving_plate_pushes_the_fluid():
