@@ -147,6 +147,30 @@ def test_table_motion_follows_its_table_in_3d(tmp_path, neighbors):
     np.testing.assert_allclose(posed_vertices(ob, sim.diagnostics()), c + (v0 - c0) @ R0 @ R.T, atol=1e-5)
 
 
+def test_velocity_motion_turns_about_a_3d_axis():
+    w = np.array([30.0, -50.0, 80.0])  # deg/s about the fixed axes
+    body = {"name": "blade", "shape": "box", "size": [0.08, 0.03, 0.05], "position": [0.5, 0.5, 0.4],
+            "rotation": [10.0, 20.0, 30.0], "motion": "velocity", "velocity": [0.2, -0.1, 0.05],
+            "angular_velocity": w.tolist()}
+    sim = Simulation(load_scene("fluid-box").with_overrides({"fluid.particles": 2000, "run.end_time": 0.5,
+                                                             "bodies": [body]}), "serial")
+    X0, _ = by_build(sim)
+    m = moving_mask(sim)
+    c0, R0 = np.array(body["position"]), rot_euler(body["rotation"])
+    local = (X0[m] - c0) @ R0
+    sim.step(60)
+    t = sim.time
+    wr = np.radians(w)
+    th = np.linalg.norm(wr) * t
+    k = wr / np.linalg.norm(wr)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    Rw = np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K  # Rodrigues
+    q = local @ (Rw @ R0).T
+    X, V = by_build(sim)
+    np.testing.assert_allclose(X[m], c0 + np.array(body["velocity"]) * t + q, rtol=0, atol=3e-6)
+    np.testing.assert_allclose(V[m], np.array(body["velocity"]) + np.cross(wr, q), rtol=0, atol=3e-6)
+
+
 def test_the_moving_plate_pushes_the_fluid():
     # a piston: a plate at the left end of a 2-D flume, started at 0.4 m/s into still water
     plate = {"name": "plate", "shape": "box", "size": [0.03, 0.25], "position": [0.03, 0.13], "motion": "velocity",
