@@ -218,6 +218,15 @@ def test_checkpoint_resumes_bitwise_with_moving_bodies(neighbors):
     assert a.time == b.time
 
 
+def test_a_checkpoint_with_a_bad_wall_order_is_refused():
+    a = sim2d()
+    a.step(5)
+    ck = a.checkpoint()
+    ck["wall_id"] = np.zeros_like(np.asarray(ck["wall_id"]))
+    with pytest.raises(Exception, match="wall_id must be a permutation"):
+        sim2d().restore(ck)
+
+
 def test_piston_wave_maker_scene_builds_and_moves():
     sim = Simulation(load_scene("piston-wave-maker").with_overrides({"fluid.particles": 1500}), "serial")
     assert sim.info["moving_bodies"] == ["piston"]

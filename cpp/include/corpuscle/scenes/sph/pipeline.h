@@ -356,7 +356,17 @@ class Pipeline {
         ex_.to_device(fields_.velocity_prev.cur(cur) + off, zero.data(), count * sizeof(Vec<D>));
       }
     } else if (name == "wall_id") {
-      // (a checkpoint's: the walls' order at the time, which the moving bodies' particles need)
+      // (a checkpoint's: the walls' order at the time, which the moving bodies' particles need;
+      // a permutation of the walls' slots nf .. n - 1)
+      const int* ids = static_cast<const int*>(src);
+      std::vector<char> seen(size_t(count), 0);
+      for (long long k = 0; k < count; ++k) {
+        const long long w = (long long)ids[k] - nf;
+        if (w < 0 || w >= count || seen[size_t(w)])
+          throw Error(std::string(kind) + ": wall_id must be a permutation of " + std::to_string(nf) + " .. " +
+                      std::to_string(nf + count - 1));
+        seen[size_t(w)] = 1;
+      }
       ex_.to_device(fields_.id.cur(cur) + off, src, count * sizeof(int));
     } else if (name == "wall_velocity") {
       // a moving wall's prescribed velocity (it enters the pair terms; the wall stays in place)
