@@ -5,6 +5,7 @@
 // back, the others broadcast).
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/array.h>
 #include <nanobind/stl/vector.h>
 
 #include <cmath>
@@ -15,6 +16,10 @@
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/tait.h"
 #include "corpuscle/scenes/sph/probe.h"
+#include "corpuscle/scenes/sph/bodies.h"
+
+#include <array>
+#include <vector>
 
 namespace nb = nanobind;
 using namespace cps;
@@ -55,6 +60,34 @@ void def3(nb::module_& m, const char* name, F f, const char* a, const char* b, c
 }  // namespace
 
 void bind_physics(nb::module_& m) {
+  // a moving body's pose at time t (scenes/sph/bodies.h, the SPH box's): its build pose and the
+  // checks that it stays in the tank
+  m.def("sph_body_pose",
+        [](int kind, std::array<double, 3> c0, std::array<double, 3> a0, std::array<double, 3> vel,
+           std::array<double, 3> omega, nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> table,
+           double t) {
+          sph::BodyMotion b{};
+          b.kind = kind;
+          b.row0 = 0;
+          b.rows = int(table.shape(0));
+          if (kind == sph::kBodyTable && (b.rows < 1 || table.shape(1) != sph::kBodyTableCols))
+            throw nb::value_error("sph_body_pose: a table needs rows of 7 floats");
+          for (int k = 0; k < 3; ++k) {
+            b.c0[k] = c0[k];
+            b.a0[k] = a0[k];
+            b.vel[k] = vel[k];
+            b.omega[k] = omega[k];
+          }
+          double out[sph::kBodyPoseFloats];
+          sph::body_pose(b, table.data(), t, out);
+          return std::vector<double>(out, out + sph::kBodyPoseFloats);
+        },
+        nb::arg("kind"), nb::arg("c0"), nb::arg("a0"), nb::arg("velocity"), nb::arg("omega"), nb::arg("table"),
+        nb::arg("t"),
+        "A moving body's pose at time t (scenes/sph/bodies.h, in double): 18 numbers, the reference point c (3), "
+        "the rotation R (9, row-major), its velocity (3) and angular velocity (3, rad/s). kind 1: constant velocity "
+        "and angular velocity from c0 and the angles a0 (degrees); kind 2: the float32 table of rows t, x, y, z, rx, "
+        "ry, rz (degrees) interpolated linearly.");
   // Tait's equation of state (physics/tait.h)
   def4(m, "tait_pressure", [](double rho, double rho0, double B, double gamma) { return tait_pressure(rho, rho0, B, gamma); },
        "rho", "rho0", "B", "gamma", "Tait's pressure B ((rho / rho0)^gamma - 1) (physics/tait.h, in double).");

@@ -13,7 +13,7 @@ from . import _camera, _colors, _overlay
 from ._render_scene import (BACKGROUND_2D, BACKGROUND_3D, CONTAINER_RGB, DIE_RGB, GHOST_RGB, LIGHT, MIN_RADIUS_PX,
                             OBSTACLE_EDGE, OBSTACLE_FILL, PIP_RGB, PIPS, ROBUST_PERCENTILES, WALL_RGB, RenderError,
                             _field_label, _raster, _scene, monotone_triangles, parse_camera, parse_range)
-from ._viz_common import parse_size, render_hint, require, scene_info, turned_points
+from ._viz_common import parse_size, posed_vertices, render_hint, require, scene_info, turned_points
 
 
 # ---- the renderer ---------------------------------------------------------------------------
@@ -359,7 +359,7 @@ class FrameRenderer:
         # triangle meshes (3-D bodies of the SPH box kinds): their faces toward the camera, lit
         for ob in self.scene.obstacles:
             if ob.get("type") == "mesh":
-                v = np.asarray(ob["vertices"], float)
+                v = posed_vertices(ob, getattr(frame, "diagnostics", None))  # (a moving body: at the frame's pose)
                 t = v[np.asarray(ob["faces"], np.int64).reshape(-1, 3)]
                 n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
                 for tri, nrm in zip(t, n):

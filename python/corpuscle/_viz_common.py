@@ -479,6 +479,11 @@ def turned_points(ob: dict, diagnostics: dict | None):
     if pts is None:
         return None
     p = np.asarray(pts, dtype=np.float64)
+    pose = ob.get("pose") if isinstance(ob.get("pose"), dict) else None
+    if pose is not None and diagnostics:
+        moved = _posed_points(p, pose, diagnostics)
+        if moved is not None:
+            return moved
     turn = ob.get("turn") if isinstance(ob.get("turn"), dict) else None
     if turn is None or not diagnostics:
         return p
@@ -494,6 +499,46 @@ def turned_points(ob: dict, diagnostics: dict | None):
     out = p.copy()
     out[:, :2] = about + (p[:, :2] - about) @ rot.T
     return out
+
+
+def posed_vertices(ob: dict, diagnostics: dict | None):
+    """A mesh obstacle's vertices (n, 3) as a frame shows them: at the frame's pose when the
+    obstacle has a ``pose`` (a moving body) and the frame its diagnostics, else as given."""
+    import numpy as np
+
+    v = np.asarray(ob["vertices"], dtype=np.float64)
+    pose = ob.get("pose") if isinstance(ob.get("pose"), dict) else None
+    if pose is None or not diagnostics:
+        return v
+    moved = _posed_points(v, pose, diagnostics)
+    return v if moved is None else moved
+
+
+def _posed_points(p, pose: dict, diagnostics: dict):
+    """A moving body's points (given at its pose of t = 0: reference point ``pose.origin``,
+    rotation ``pose.rotation``, D x D) at a frame's pose: its diagnostics ``<pose.diagnostic>_x``,
+    ``_y`` (``_z``) and ``_angle`` (2-D, degrees) or ``_r00`` .. ``_r22`` (3-D). None when the
+    frame lacks them (the points are then drawn as given)."""
+    import numpy as np
+
+    try:
+        name = str(pose["diagnostic"])
+        c0 = np.asarray(pose["origin"], dtype=np.float64)
+        R0 = np.asarray(pose["rotation"], dtype=np.float64)
+        D = len(c0)
+        if D not in (2, 3) or R0.shape != (D, D) or p.ndim != 2 or p.shape[1] != D:
+            return None
+        c = np.array([float(diagnostics[f"{name}_{a}"]) for a in "xyz"[:D]])
+        if D == 2:
+            a = math.radians(float(diagnostics[f"{name}_angle"]))
+            R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        else:
+            R = np.array([[float(diagnostics[f"{name}_r{r}{q}"]) for q in range(3)] for r in range(3)])
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not (np.all(np.isfinite(c)) and np.all(np.isfinite(R))):
+        return None
+    return c + (p - c0) @ R0 @ R.T
 
 
 def _check_body(b: Any, k: int) -> dict:

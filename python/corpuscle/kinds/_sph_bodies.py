@@ -2,33 +2,121 @@
 surface becomes dynamic boundary particles (DBC, as the tank's walls) on the fluid's lattice
 (i + 1/2) dp, inside the body and as many layers deep as the kernel support; fluid is never
 placed inside a body or within half a spacing of it. The body particles join the walls
-(slots [n_fluid, n)), so the core needs nothing new for them.
+(slots [n_fluid, n)).
 
-Fixed bodies only: ``motion`` other than "fixed" is refused with one line (moving and free
-bodies are not in the core yet)."""
+A moving body (``motion = "velocity"`` or ``"table"``) is rigid: the core sets its particles
+from its pose each step (cpp/include/corpuscle/scenes/sph/bodies.h), each particle keeping its
+offset in the body's frame; its pose at t = 0 is where it is built (for a table, the table's
+pose at t = 0, not ``position`` and ``rotation``). ``motion = "free"`` is refused with one line
+(free bodies are not in the core yet)."""
 
 from __future__ import annotations
 
 from typing import Any, Callable
 
+import math
+
 import numpy as np
 
 from .. import geometry
+from . import core
 from ..schema import CrossCheck, SceneError, _fmt_value
 
 #: the most [[bodies]] entries of an SPH box scene
 MAX_BODIES = 64
 #: the motions the SPH box kinds support
-MOTIONS = ("fixed",)
+MOTIONS = ("fixed", "velocity", "table")
+#: the most moving bodies of a scene (kMaxMovingBodies of scenes/sph/bodies.h)
+MAX_MOVING = 16
+#: body_motion's kind codes (bodies.h)
+MOTION_CODES = {"velocity": 1, "table": 2}
+#: the times a moving body is checked to stay in the tank at (besides its table's rows)
+CHECK_SAMPLES = 401
 
 
 def body_keys(dim: int):
     return geometry.body_keys(dim)
 
 
+class Motion:
+    """A moving body's prescribed motion as the core takes it (bodies.h): its kind code, the
+    velocity motion's start, velocity and angular velocity (rad/s), or its table (float32 rows
+    t, x, y, z, rx, ry, rz; degrees)."""
+
+    def __init__(self, entry: dict[str, Any], dim: int, label: str):
+        self.kind = MOTION_CODES[entry["motion"]]
+        pad = [0.0] * (3 - dim)
+        self.c0 = [float(x) for x in entry["position"]] + pad
+        if dim == 3:
+            self.a0 = [float(x) for x in entry["rotation"]]
+            self.omega = [math.radians(float(x)) for x in entry["angular_velocity"]]
+        else:
+            self.a0 = [0.0, 0.0, float(entry["rotation"])]
+            self.omega = [0.0, 0.0, math.radians(float(entry["angular_velocity"]))]
+        self.velocity = [float(x) for x in entry["velocity"]] + pad
+        if self.kind == MOTION_CODES["table"]:
+            t = geometry.read_motion_table(entry["motion_file"], dim, f"{label}.motion_file")
+            rows = np.zeros((len(t), 7))
+            rows[:, 0] = t[:, 0]
+            rows[:, 1:1 + dim] = t[:, 1:1 + dim]
+            if dim == 3:
+                rows[:, 4:7] = t[:, 4:7]
+            else:
+                rows[:, 6] = t[:, 3]
+            self.table = np.ascontiguousarray(rows, dtype=np.float32)
+            if np.any(np.diff(self.table[:, 0].astype(np.float64)) <= 0.0):
+                raise SceneError(f"{label}.motion_file: {entry['motion_file']}: times closer than float32 "
+                                 f"resolves (they must increase strictly)")
+        else:
+            self.table = np.zeros((0, 7), dtype=np.float32)
+
+    def pose(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(c, R, velocity, angular velocity) at time t (the core's, bodies.h, in double)."""
+        p = np.asarray(core().sph_body_pose(self.kind, self.c0, self.a0, self.velocity, self.omega, self.table,
+                                            float(t)), dtype=np.float64)
+        return p[0:3], p[3:12].reshape(3, 3), p[12:15], p[15:18]
+
+    def params(self, row0: int) -> list[float]:
+        """This body's numbers of the core's body_motion (its table's rows from row0)."""
+        return [float(self.kind), float(row0), float(len(self.table)), *self.c0, *self.a0, *self.velocity, *self.omega]
+
+    def times(self, end_time: float) -> np.ndarray:
+        """The times it is checked at in [0, end_time]: a regular sampling and its table's rows."""
+        t = np.linspace(0.0, end_time, CHECK_SAMPLES)
+        rows = self.table[:, 0].astype(np.float64)
+        return np.union1d(t, rows[(rows > 0.0) & (rows < end_time)])
+
+
+def _pose_body(b, c: np.ndarray, R: np.ndarray) -> None:
+    """Place body b with its reference point at c and rotation R (3-D; 2-D: their first axes)."""
+    D = b.dim
+    if b.vertices is not None:  # a mesh: its file's vertices moved (make_body's placement)
+        mesh = b.extra["mesh"]
+        b.vertices = np.asarray(mesh.vertices, dtype=np.float64) @ R[:D, :D].T + c[:D]
+    b.position = np.asarray(c[:D], dtype=np.float64)
+    b.rotation = np.asarray(R[:D, :D], dtype=np.float64)
+
+
+def posed_bodies(arrays: dict[str, list], dim: int) -> tuple[list, list]:
+    """The bodies at their pose of t = 0 and their motions (None for a fixed body)."""
+    bodies = geometry.make_bodies(arrays, dim)
+    motions = []
+    for k, (b, entry) in enumerate(zip(bodies, arrays.get("bodies", [])), start=1):
+        if entry["motion"] == "fixed":
+            motions.append(None)
+            continue
+        m = Motion(entry, dim, f"bodies[{k}]")
+        c, R, _, _ = m.pose(0.0)
+        _pose_body(b, c, R)
+        motions.append(m)
+    return bodies, motions
+
+
 def check_bodies(box: Callable[[dict[str, Any]], Any], dim: int) -> CrossCheck:
     """The [[bodies]] checks: each entry's keys (geometry.check_bodies), its mesh readable and
-    closed, and the body inside the tank (box(values): its inner size from the origin)."""
+    closed, the body inside the tank (box(values): its inner size from the origin), a moving
+    body there at every time of the run (its table's rows and CHECK_SAMPLES times), at most
+    MAX_MOVING moving bodies, and no sliding lid beside them."""
     def check(values, arrays) -> None:
         entries = arrays.get("bodies", [])
         if not entries:
@@ -36,24 +124,45 @@ def check_bodies(box: Callable[[dict[str, Any]], Any], dim: int) -> CrossCheck:
         geometry.check_bodies(arrays, dim, motions=MOTIONS, open_allowed=True)
         size = np.asarray(box(values), dtype=np.float64)
         tol = 1e-9 * max(float(size.max()), 1.0)
-        for k, b in enumerate(geometry.make_bodies(arrays, dim), start=1):
+        bodies, motions = posed_bodies(arrays, dim)
+        moving = sum(m is not None for m in motions)
+        if moving > MAX_MOVING:
+            raise SceneError(f"bodies: {moving} moving bodies, at most {MAX_MOVING}")
+        if moving and values.get("walls.moving"):
+            raise SceneError(f"walls.moving = {_fmt_value(list(values['walls.moving']))} with moving bodies: a "
+                             f"sliding lid and moving bodies in one scene are not supported")
+        end = float(values["run.end_time"])
+        for k, (b, m) in enumerate(zip(bodies, motions), start=1):
             lo, hi = b.bounds()
             if np.any(lo < -tol) or np.any(hi > size + tol):
                 raise SceneError(f"bodies[{k}] ({b.name!r}) reaches outside the tank: its bounds "
                                  f"{_fmt_value(np.round(lo, 6).tolist())} .. {_fmt_value(np.round(hi, 6).tolist())} m, "
                                  f"the tank 0 .. {_fmt_value(size.tolist())} m (check bodies[{k}].position, size, "
                                  f"scale and units)")
+            if m is None:
+                continue
+            c0, R0, _, _ = m.pose(0.0)
+            local = (geometry.surface_mesh(b)[0] - c0[:dim]) @ R0[:dim, :dim]
+            for t in m.times(end):
+                c, R, _, _ = m.pose(t)
+                w = local @ R[:dim, :dim].T + c[:dim]
+                lo, hi = w.min(axis=0), w.max(axis=0)
+                if np.any(lo < -tol) or np.any(hi > size + tol):
+                    raise SceneError(f"bodies[{k}] ({b.name!r}) leaves the tank at t = {t:.6g} s (its bounds "
+                                     f"{_fmt_value(np.round(lo, 6).tolist())} .. "
+                                     f"{_fmt_value(np.round(hi, 6).tolist())} m, the tank 0 .. "
+                                     f"{_fmt_value(size.tolist())} m): check bodies[{k}]'s motion")
     return check
 
 
 def build_bodies(arrays: dict[str, list], dim: int, dp: float, layers: int,
-                 fluid: np.ndarray) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
+                 fluid: np.ndarray) -> tuple[list, np.ndarray, np.ndarray, np.ndarray, list]:
     """(bodies, their boundary particles (n, dim), each particle's body index, the mask of
-    the fluid points no body excludes). Particles two bodies share (overlapping bodies) are
-    kept once."""
-    bodies = geometry.make_bodies(arrays, dim)
+    the fluid points no body excludes, the bodies' motions (None: fixed)), the bodies at their
+    pose of t = 0. Particles two bodies share (overlapping bodies) are kept once."""
+    bodies, motions = posed_bodies(arrays, dim)
     if not bodies:
-        return [], np.zeros((0, dim)), np.zeros(0, np.int32), np.ones(len(fluid), bool)
+        return [], np.zeros((0, dim)), np.zeros(0, np.int32), np.ones(len(fluid), bool), []
     pts, owner = [], []
     for k, b in enumerate(bodies):
         p = geometry.sample_boundary(b, dp, layers)
@@ -66,18 +175,62 @@ def build_bodies(arrays: dict[str, list], dim: int, dp: float, layers: int,
     _, first = np.unique(cells, axis=0, return_index=True)
     first = np.sort(first)
     keep = geometry.fluid_clear(bodies, fluid, dp, layers)
-    return bodies, pts[first], owner[first], keep
+    return bodies, pts[first], owner[first], keep, motions
 
 
-def header_obstacles(bodies: list) -> list[dict[str, Any]]:
+def moving_arrays(motions: list, owner: np.ndarray, body_pts: np.ndarray, n_wall: int,
+                  dim: int) -> tuple[dict[str, Any], dict[str, np.ndarray], list[int]]:
+    """The core's moving-body parameters (n_moving, body_motion) and arrays (wall_body: each
+    wall particle's moving body or -1, wall_local: its offset in the body's frame at t = 0,
+    body_table: the tables' rows), given the body particles (the last len(body_pts) of the
+    n_wall walls) and their owners; and the moving bodies' body indices. Empty without any."""
+    index = [k for k, m in enumerate(motions) if m is not None]
+    if not index:
+        return {}, {}, []
+    wall_body = np.full(n_wall, -1.0, dtype=np.float32)
+    local = np.zeros((n_wall, 3))
+    first = n_wall - len(body_pts)
+    numbers, tables, row0 = [], [], 0
+    for j, k in enumerate(index):
+        m = motions[k]
+        sel = np.flatnonzero(owner == k)
+        c, R, _, _ = m.pose(0.0)
+        wall_body[first + sel] = float(j)
+        p3 = np.zeros((len(sel), 3))
+        p3[:, :dim] = body_pts[sel]
+        local[first + sel] = (p3 - c) @ R  # R^T (x - c)
+        numbers += m.params(row0)
+        row0 += len(m.table)
+        tables.append(m.table)
+    arrays = {"wall_body": wall_body.reshape(-1, 1), "wall_local": np.ascontiguousarray(local, dtype=np.float32)}
+    if row0:
+        arrays["body_table"] = np.ascontiguousarray(np.concatenate(tables), dtype=np.float32)
+    return {"n_moving": len(index), "body_motion": numbers}, arrays, index
+
+
+def header_obstacles(bodies: list, motions: list | None = None) -> list[dict[str, Any]]:
     """The bodies as the run header's obstacles (render, live and export draw them): an
     unrotated 3-D box as a box, a 2-D body as its outline polygon, any other 3-D body as its
-    triangles (``type = "mesh"``: ``vertices``, ``faces``)."""
+    triangles (``type = "mesh"``: ``vertices``, ``faces``). A moving body (a 2-D polygon, a
+    3-D body always as its triangles) adds ``pose``: the diagnostics of its pose in each frame
+    (body_<name>_x, ...), its reference point and rotation at t = 0 (what its points are
+    given at)."""
     out = []
-    for b in bodies:
+    motions = motions or [None] * len(bodies)
+    for b, m in zip(bodies, motions):
         v, f = geometry.surface_mesh(b)
         if b.dim == 2:
-            out.append({"name": b.name, "type": "polygon", "points": np.round(v, 9).tolist()})
+            ob = {"name": b.name, "type": "polygon", "points": np.round(v, 9).tolist()}
+            if m is not None:
+                c, R, _, _ = m.pose(0.0)
+                ob["pose"] = {"diagnostic": f"body_{b.name}", "origin": c[:2].tolist(),
+                              "rotation": R[:2, :2].tolist()}
+            out.append(ob)
+        elif m is not None:  # a moving 3-D body: its triangles at t = 0 and its pose
+            c, R, _, _ = m.pose(0.0)
+            out.append({"name": b.name, "type": "mesh", "vertices": np.round(v, 9).tolist(),
+                        "faces": np.asarray(f, np.int64).tolist(),
+                        "pose": {"diagnostic": f"body_{b.name}", "origin": c.tolist(), "rotation": R.tolist()}})
         elif b.shape == "box" and np.allclose(b.rotation, np.eye(3)):
             lo, hi = b.bounds()
             out.append({"name": b.name, "type": "box", "min": lo.tolist(), "max": hi.tolist()})

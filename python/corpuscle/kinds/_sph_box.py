@@ -28,7 +28,7 @@ import numpy as np
 
 from ..schema import INT64_MAX, CrossCheck, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
-from ._sph_bodies import MAX_BODIES, body_keys, build_bodies, check_bodies, header_obstacles
+from ._sph_bodies import MAX_BODIES, body_keys, build_bodies, check_bodies, header_obstacles, moving_arrays
 from ._sph_probes import (PROBE_SERIES, ProbeSeries, _check_probe_faces, _check_probes, _probes_inside,  # noqa: F401
                           pressure_impulse, probe_face_params, probe_face_reach, probe_keys, probe_sample_points,
                           probe_samples_of)
@@ -243,7 +243,7 @@ class SphBox(Kind):
         wall_layers = np.where(periodic, 0, layers)
         # [[bodies]]: their boundary particles join the walls; no fluid inside them (_sph_bodies.py)
         fluid_pts = lattice(f0, f1, dp)
-        bodies, body_pts, _, clear = build_bodies(scene.arrays, D, dp, layers, fluid_pts)
+        bodies, body_pts, owner, clear, motions = build_bodies(scene.arrays, D, dp, layers, fluid_pts)
         fluid_pts = fluid_pts[clear]
         nf_est = len(fluid_pts)
         if nf_est == 0:
@@ -300,6 +300,9 @@ class SphBox(Kind):
         inside = np.all((pts > 0.0) & (pts < box_hi), axis=1)
         wall = np.concatenate([pts[~inside], body_pts]) if len(body_pts) else pts[~inside]
         wall_vel = self._wall_velocity(v, wall, box_hi)
+        # moving bodies: the core sets their particles from their poses (scenes/sph/bodies.h)
+        moving_params, moving, moving_index = moving_arrays(motions, owner, body_pts, len(wall), D)
+        params.update(moving_params)
         top = float(f1[-1] * dp)
         near = np.all((wall[:, :-1] > (f0[:-1] - layers) * dp) & (wall[:, :-1] < (f1[:-1] + layers) * dp), axis=1)
         wall_rho = np.where(near, hydrostatic_density(top - wall[:, -1], rho0, B, gamma, g), rho0)
@@ -326,15 +329,17 @@ class SphBox(Kind):
                   "wall_density": np.ascontiguousarray(wall_rho, dtype=np.float32)}
         if wall_vel is not None:
             arrays["wall_velocity"] = np.ascontiguousarray(wall_vel, dtype=np.float32).reshape(-1, D)
+        arrays.update(moving)
         info = {"spacing": dp, "h": h, "hs": hs, "mass": rho0 * dp ** D, "rho0": rho0, "c0": c0, "B": B,
                 "gamma": gamma, "gravity": g, "layers": layers, "box": box_hi.copy(), "fluid_height": height,
                 "fluid_lo": f0 * dp, "fluid_hi": f1 * dp, "n_fluid": nf_est, "n_wall": int(box_cells),
                 "probe_names": [str(p["name"]) for p in scene.arrays.get("probes", [])],
                 "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D),
-                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies),
                 "periodic": [a for a in "xyz"[:D] if a in v["boundary.periodic"]],
                 "moving_walls": list(v["walls.moving"]), "wall_speed": list(map(float, v["walls.velocity"])),
-                "body_force": list(map(float, v["fluid.body_force"]))}
+                "body_force": list(map(float, v["fluid.body_force"])),
+                "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies, motions),
+                "moving_bodies": [bodies[k].name for k in moving_index], "moving_obstacles": moving_index}
         info.update(self.extra_info(v, info))
         return Build(params, arrays, info)
 
@@ -432,6 +437,7 @@ class SphBox(Kind):
         st = self.state(sim, s)
         out = {k: float(st[k]) for k in ("kinetic_energy", "vmax", "rho_min", "rho_max", "p_max", "mean_neighbors",
                                          "outside")}
+        out.update(self.body_diagnostics(sim, s))
         out["probe_time"] = st["probe_time"]
         axes = "xyz"[:self.dim]
         for name, p in st["probes"].items():
@@ -447,6 +453,36 @@ class SphBox(Kind):
 
     def extra_diagnostics(self, sim) -> dict[str, float]:
         return {}
+
+    def body_poses(self, sim, s: dict[str, Any] | None = None) -> dict[str, dict[str, np.ndarray]]:
+        """name -> {position, rotation (3 x 3), velocity, angular_velocity (rad/s)} of each moving
+        body at the state's time (the core's record, scenes/sph/bodies.h)."""
+        s = sim.core.scalars() if s is None else s
+        pose = np.asarray(s.get("body_pose", []), dtype=np.float64).reshape(-1, 18)
+        out = {}
+        for j, name in enumerate(sim.info.get("moving_bodies", [])):
+            p = pose[j]
+            out[name] = {"position": p[0:3], "rotation": p[3:12].reshape(3, 3), "velocity": p[12:15],
+                         "angular_velocity": p[15:18]}
+        return out
+
+    def body_diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:
+        """Each moving body's reference point and velocity (body_<name>_x, ..., _vx, ...) and, 3-D,
+        its rotation matrix's rows (_r00 .. _r22), 2-D its angle (_angle, degrees)."""
+        out = {}
+        axes = "xyz"[:self.dim]
+        for name, p in self.body_poses(sim, s).items():
+            for k, a in enumerate(axes):
+                out[f"body_{name}_{a}"] = float(p["position"][k])
+                out[f"body_{name}_v{a}"] = float(p["velocity"][k])
+            R = p["rotation"]
+            if self.dim == 2:
+                out[f"body_{name}_angle"] = math.degrees(math.atan2(R[1, 0], R[0, 0]))
+            else:
+                for r in range(3):
+                    for c in range(3):
+                        out[f"body_{name}_r{r}{c}"] = float(R[r, c])
+        return out
 
     def result(self, sim, s: dict[str, Any]) -> dict[str, Any]:
         st = self.state(sim, s)

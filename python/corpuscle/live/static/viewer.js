@@ -174,6 +174,11 @@
       if (ob.turn && typeof ob.turn === 'object' && Array.isArray(ob.turn.about)) {
         o.turn = { diagnostic: String(ob.turn.diagnostic || ''), about: pad3(ob.turn.about), sign: +(ob.turn.sign ?? 1) };
       }
+      // a moving 2-D body (the SPH box kinds): its points at t = 0 about `origin`, turned by `rotation`
+      if (ob.pose && typeof ob.pose === 'object' && Array.isArray(ob.pose.origin) && ob.pose.origin.length === 2 &&
+          Array.isArray(ob.pose.rotation) && ob.pose.rotation.length === 2) {
+        o.pose = { diagnostic: String(ob.pose.diagnostic || ''), origin: ob.pose.origin.map(Number), R0: ob.pose.rotation.map((r) => r.map(Number)) };
+      }
       if (Array.isArray(ob.points) && ob.points.length >= 2 && Array.isArray(ob.extrude) && ob.extrude.length === 2 && S.dim === 3) {
         // an x-y section swept along z (the 3-D wind tunnel's airfoil): its outline at both ends,
         // joined at the section's two extreme vertices in x (leading and trailing edge)
@@ -213,6 +218,20 @@
   }
   // an obstacle's vertices as the frame's diagnostic turns it (counter-clockwise degrees about z)
   function turned(o, data) {
+    if (o.pose && data.length) {  // at the frame's pose: c + R R0^T (p - c0)
+      const D = S.frame && S.frame.meta.diagnostics ? S.frame.meta.diagnostics : {}, n = o.pose.diagnostic;
+      const cx = D[n + '_x'], cy = D[n + '_y'], an = D[n + '_angle'];
+      if ([cx, cy, an].every((v) => v !== null && v !== undefined && isFinite(v))) {
+        const a = an * Math.PI / 180, c = Math.cos(a), s = Math.sin(a), [ox, oy] = o.pose.origin, R0 = o.pose.R0;
+        const out = new Float32Array(data.length);
+        for (let i = 0; i < data.length; i += 3) {
+          const x = data[i] - ox, y = data[i + 1] - oy;
+          const lx = R0[0][0] * x + R0[1][0] * y, ly = R0[0][1] * x + R0[1][1] * y;  // R0^T (p - c0)
+          out[i] = cx + c * lx - s * ly; out[i + 1] = cy + s * lx + c * ly; out[i + 2] = data[i + 2];
+        }
+        return out;
+      }
+    }
     if (!o.turn || !data.length) return data;
     const d = S.frame && S.frame.meta.diagnostics ? S.frame.meta.diagnostics[o.turn.diagnostic] : null;
     if (d === null || d === undefined || !isFinite(d) || d === 0) return data;

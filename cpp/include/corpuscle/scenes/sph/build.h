@@ -142,6 +142,32 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   if (m.lanes != 0 && m.lanes != 1 && m.lanes != 2 && m.lanes != 4 && m.lanes != 8)
     throw Error(std::string(kind) + ": lanes must be 0 (automatic), 1, 2, 4 or 8, got " + std::to_string(p.integer("lanes")));
   m.fixed_terms = p.has("fixed_terms") ? int(p.integer("fixed_terms")) : 1;
+  // moving bodies (bodies.h): per body kind, row0, rows, c0 (3), a0 (3, degrees), velocity (3),
+  // angular velocity (3, rad/s)
+  m.n_moving = p.has("n_moving") ? int(p.integer("n_moving")) : 0;
+  if (m.n_moving < 0 || m.n_moving > kMaxMovingBodies)
+    throw Error(std::string(kind) + ": " + std::to_string(m.n_moving) + " moving bodies, at most " + std::to_string(kMaxMovingBodies));
+  if (m.n_moving > 0) {
+    constexpr int per = 15;
+    auto bm = p.numbers("body_motion");
+    if (int(bm.size()) != per * m.n_moving)
+      throw Error(std::string(kind) + ": body_motion needs " + std::to_string(per) + " numbers a moving body");
+    for (int b = 0; b < m.n_moving; ++b) {
+      const double* q = bm.data() + per * b;
+      BodyMotion& mo = m.motion[b];
+      mo.kind = int(q[0]);
+      if (mo.kind != kBodyVelocity && mo.kind != kBodyTable)
+        throw Error(std::string(kind) + ": body_motion kind must be 1 (velocity) or 2 (table)");
+      mo.row0 = int(q[1]);
+      mo.rows = int(q[2]);
+      for (int k = 0; k < 3; ++k) {
+        mo.c0[k] = q[3 + k];
+        mo.a0[k] = q[6 + k];
+        mo.vel[k] = q[9 + k];
+        mo.omega[k] = q[12 + k];
+      }
+    }
+  }
   auto probes = p.numbers("probes");
   if (probes.size() % D != 0) throw Error(std::string(kind) + ": probes need " + std::to_string(D) + " numbers each");
   m.n_probes = int(probes.size() / D);
@@ -182,6 +208,21 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
     if (a.components != D || a.count != m->n_wall)
       throw Error(kind + ": the initial wall_velocity array must be (" + std::to_string(m->n_wall) + ", " + std::to_string(D) + ")");
     sim->upload("wall_velocity", a.data, a.count);
+  }
+  // moving bodies: their motion tables, each wall particle's body and offset in its frame
+  if (m->n_moving > 0) {
+    auto get = [&](const char* name, int comps, long long count) -> ArrayView {
+      if (!r.arrays || !r.arrays->has(name)) throw Error(kind + ": no " + name + " array (the scene has moving bodies)");
+      ArrayView a = r.arrays->get(name);
+      if (a.components != comps || (count >= 0 && a.count != count))
+        throw Error(kind + ": the " + name + " array must be (" + (count >= 0 ? std::to_string(count) : "rows") + ", " +
+                    std::to_string(comps) + ")");
+      return a;
+    };
+    const ArrayView body = get("wall_body", 1, m->n_wall), local = get("wall_local", 3, m->n_wall);
+    const bool tables = r.arrays->has("body_table");
+    const ArrayView table = tables ? get("body_table", kBodyTableCols, -1) : ArrayView{};
+    sim->pipeline().set_bodies(table.data, table.count, body.data, local.data);
   }
   return sim;
 }

@@ -21,6 +21,7 @@
 // order (they are keyed with tag 0 and 1 of the cell grid).
 #pragma once
 #include "corpuscle/physics/sph_kernel_families.h"
+#include "corpuscle/scenes/sph/bodies.h"
 #include "corpuscle/physics/sph_pair_terms.h"
 #include "corpuscle/physics/tait.h"
 #include "corpuscle/physics/timestep.h"
@@ -92,6 +93,10 @@ struct Model {
   // and backend); 0: always dispatched at run time (the same functions: on the CPU the same
   // sums bit for bit, on CUDA up to the compiler's contractions, which tests check)
   int fixed_terms;
+  // moving bodies (scenes/sph/bodies.h): their prescribed motions; the wall particles of each
+  // follow its pose (the motion tables in the pipeline's buffer)
+  int n_moving;
+  BodyMotion motion[kMaxMovingBodies];
   int n_probes;
   float probes[kMaxProbes * D];
   CPS_HD Vec<D> probe(int k) const {
@@ -187,6 +192,8 @@ struct Scene {
   double series_next[kMaxProbes];
   double series_t[kMaxProbes * kProbeSeries];
   float series_p[kMaxProbes * kProbeSeries];
+  // the moving bodies' poses at clock.time (bodies.h: c, R, v_c, w each)
+  float body_pose[kMaxMovingBodies * kBodyPoseFloats];
 };
 
 // what the pair loop reads of a neighbour j besides its position, packed for one vector load

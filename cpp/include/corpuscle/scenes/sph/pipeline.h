@@ -136,7 +136,8 @@ class Pipeline {
                        (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0));
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
     const double lists = kLists ? SlotNeighborList<D, Exec>::bytes(int(n), m.max_neighbors) : 0.0;
-    return n * per + cells + lists + sizeof(ModelT);
+    const double bodies = m.n_moving > 0 ? double(m.n_wall) * (sizeof(int) + 3 * sizeof(float)) : 0.0;
+    return n * per + cells + lists + bodies + sizeof(ModelT);
   }
 
   CPS_KIND_STORED_TABLES(CPS_SPH_FIELDS, CPS_SPH_WALL_FIELDS, CPS_SPH_SCALARS, CPS_SPH_CONTROLS, Scene, Control,
@@ -226,7 +227,37 @@ class Pipeline {
     if constexpr (kLists) {
       if (relist_) ex_.single(RaiseRebuildStage{g_});
     }
+    if (relist_ && m_.n_moving > 0) place_bodies(arrays(parity_, parity_ ^ 1));  // (a set or restored state)
     relist_ = false;
+  }
+
+  // the moving bodies (bodies.h): the motion tables' rows (kBodyTableCols floats each), and per
+  // wall particle (by its slot at the build) its moving body (-1: none) and its offset in the
+  // body's frame (3 floats)
+  void set_bodies(const float* table, long long rows, const float* body, const float* local) {
+    const int nw = n_ - nf_;
+    if (rows > 0) {
+      table_.resize(size_t(rows) * kBodyTableCols);
+      ex_.to_device(table_.data(), table, size_t(rows) * kBodyTableCols * sizeof(float));
+    }
+    std::vector<int> b(size_t(nw > 0 ? nw : 0));
+    for (int k = 0; k < nw; ++k) {
+      b[k] = int(body[k]);
+      if (b[k] < -1 || b[k] >= m_.n_moving)
+        throw Error(std::string(kind) + ": wall particle " + std::to_string(k) + " names moving body " +
+                    std::to_string(b[k]) + " of " + std::to_string(m_.n_moving));
+    }
+    wall_body_.resize(size_t(nw));
+    wall_local_.resize(size_t(nw) * 3);
+    if (nw > 0) {
+      ex_.to_device(wall_body_.data(), b.data(), size_t(nw) * sizeof(int));
+      ex_.to_device(wall_local_.data(), local, size_t(nw) * 3 * sizeof(float));
+    }
+    for (int k = 0; k < m_.n_moving; ++k)
+      if (m_.motion[k].kind == kBodyTable && (m_.motion[k].row0 < 0 || m_.motion[k].rows < 2 ||
+                                              m_.motion[k].row0 + m_.motion[k].rows > rows))
+        throw Error(std::string(kind) + ": moving body " + std::to_string(k) + "'s table rows lie outside the table");
+    relist_ = true;
   }
   void advance(bool) { parity_ ^= 1; }
   void invalidate(bool) { relist_ = true; }
@@ -284,6 +315,8 @@ class Pipeline {
       ex_.mark(3);
       // 5. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n_, IntegrateStage<D>{md, g, s, nf_});
+      // the moving bodies' particles at the pose of the new time (bodies.h)
+      if (m_.n_moving > 0) place_bodies(s);
       ex_.mark(4);
     } else {
       ex_.reduce(s.items, n_, &g->sums, SumsOp{}, StepSums::identity());
@@ -324,6 +357,19 @@ class Pipeline {
         ex_.to_device(fields_.velocity.cur(cur) + off, zero.data(), count * sizeof(Vec<D>));
         ex_.to_device(fields_.velocity_prev.cur(cur) + off, zero.data(), count * sizeof(Vec<D>));
       }
+    } else if (name == "wall_id") {
+      // (a checkpoint's: the walls' order at the time, which the moving bodies' particles need;
+      // a permutation of the walls' slots nf .. n - 1)
+      const int* ids = static_cast<const int*>(src);
+      std::vector<char> seen(size_t(count), 0);
+      for (long long k = 0; k < count; ++k) {
+        const long long w = (long long)ids[k] - nf;
+        if (w < 0 || w >= count || seen[size_t(w)])
+          throw Error(std::string(kind) + ": wall_id must be a permutation of " + std::to_string(nf) + " .. " +
+                      std::to_string(nf + count - 1));
+        seen[size_t(w)] = 1;
+      }
+      ex_.to_device(fields_.id.cur(cur) + off, src, count * sizeof(int));
     } else if (name == "wall_velocity") {
       // a moving wall's prescribed velocity (it enters the pair terms; the wall stays in place)
       ex_.to_device(fields_.velocity.cur(cur) + off, src, count * sizeof(Vec<D>));
@@ -408,6 +454,12 @@ class Pipeline {
     }
   }
 
+  // the moving bodies' poses at the record's time and their particles at them (arrays a)
+  void place_bodies(const Arrays<D>& a) {
+    ex_.single(BodyPoseStage<D>{model_.data(), g_, table_.size() ? table_.data() : nullptr});
+    if (n_ > nf_) ex_.for_each(n_ - nf_, BodyParticlesStage<D>{model_.data(), g_, a, wall_body_.data(), wall_local_.data(), nf_});
+  }
+
   Arrays<D> arrays(int cur, int nxt) {
     Arrays<D> a;
     fields_.fill(a, cur);  // (the other buffers: nxt = cur ^ 1)
@@ -432,6 +484,9 @@ class Pipeline {
   SlotNeighborList<D, Exec> lists_;
   bool relist_ = false;
   Buf<StepSums> items_;
+  Buf<float> table_;      // the moving bodies' motion tables
+  Buf<int> wall_body_;    // per wall particle (its slot at the build): its moving body or -1
+  Buf<float> wall_local_; // per wall particle: its offset in its body's frame
   Buf<int> tags_;
   int nf_ = 0, n_ = 0;
   int parity_ = 0;

@@ -74,13 +74,14 @@ struct PairConsts {
   DensityDiffusion dd;
   Vec<D> gravity;
   int shifting;  // grad C accumulated (particle shifting on)
+  int moving_bodies;  // the walls' velocity enters the continuity equation (scenes with moving bodies)
   static PairConsts make(const Model<D>& m) {
     // the terms were made from the same hs with the same expression (0.01f * hs * hs)
     if (m.av.eta2 != m.lv.eta2 || (m.dd.kind != DensityDiffusionKind::None && m.dd.eta2 != m.av.eta2) ||
         m.av.hs != m.hs)
       throw Error("sph: the pair terms' eta^2 or hs differ");
     return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.av.eta2, m.viscosity, m.av, m.lv, m.dd, m.gravity,
-                      m.shift_a > 0.0f ? 1 : 0};
+                      m.shift_a > 0.0f ? 1 : 0, m.n_moving > 0 ? 1 : 0};
   }
 };
 
@@ -145,8 +146,10 @@ struct InteractStage {
       dv[k] = s.vel_i[k] - pv.v[k];
       // the continuity equation sees the particles' motion: a wall particle's is zero (a moving
       // wall's prescribed velocity, a lid sliding in its own plane, enters the viscous terms
-      // only; for walls at rest the same values)
-      dvc[k] = (fi ? s.vel_i[k] : 0.0f) - (fj ? pv.v[k] : 0.0f);
+      // only; for walls at rest the same values), except in scenes with moving bodies, whose
+      // particles do move (bodies.h; such scenes have no sliding lids, and their walls at rest
+      // carry zero)
+      dvc[k] = (fi || m.moving_bodies ? s.vel_i[k] : 0.0f) - (fj || m.moving_bodies ? pv.v[k] : 0.0f);
     }
     s.drho += m.mass * dot(dvc, gw);
     if (!fi) return;
@@ -356,6 +359,51 @@ struct FinalizeStage {
       G.rebuild = 0;  // this step's readers are done with it; the integration may raise it again
     }
     advance_clock(C, dt, last);
+  }
+};
+
+// the moving bodies' poses at the clock's time (one item a scene; bodies.h, in double)
+template <int D>
+struct BodyPoseStage {
+  const Model<D>* model;
+  Scene* g;
+  const float* table;  // the motion tables' rows (kBodyTableCols floats each)
+  CPS_HD void operator()(int) const {
+    const Model<D>& m = *model;
+    for (int b = 0; b < m.n_moving; ++b) {
+      double p[kBodyPoseFloats];
+      body_pose(m.motion[b], table, g->clock.time, p);
+      for (int k = 0; k < kBodyPoseFloats; ++k) g->body_pose[b * kBodyPoseFloats + k] = float(p[k]);
+    }
+  }
+};
+
+// a moving body's particles (wall slots) at its pose: position, velocity (and the previous
+// step's, unused by the walls' integration). `body` and `local` are indexed by the wall's id
+// (its slot at the build, less n_fluid): the body (-1: a tank wall or a fixed body) and the
+// offset in the body's frame. `lists`: a particle moved more than skin h / 2 since the build
+// raises the next step's relisting, as the integration does for the fluid
+template <int D>
+struct BodyParticlesStage {
+  const Model<D>* model;
+  Scene* g;
+  Arrays<D> a;
+  const int* body;
+  const float* local;
+  int nf;
+  CPS_HD void operator()(int k) const {
+    const int i = nf + k;
+    const int w = a.id[i] - nf;
+    const int b = body[w];
+    if (b < 0) return;
+    Vec<D> x, v;
+    body_point<D>(g->body_pose + b * kBodyPoseFloats, local + 3 * w, x, v);
+    a.position[i] = x;
+    a.velocity[i] = v;
+    a.velocity_prev[i] = v;
+    const Model<D>& m = *model;
+    if (a.x_build && norm2(m.per.displacement(x - a.x_build[i])) > m.rebuild_disp2 && g->rebuild == 0)
+      atomic_max(&g->rebuild, 1);
   }
 };
 

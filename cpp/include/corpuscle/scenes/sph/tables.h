@@ -23,6 +23,7 @@
 // X(name, C type, components, group, checkpointed, settable, storage, count)
 #define CPS_SPH_WALL_FIELDS(X)                                                                 \
   X(wall_position, float, D, "wall", true, true, fields_.position.cur(cur) + nf, nw)          \
+  X(wall_id, int, 1, "wall", true, false, fields_.id.cur(cur) + nf, nw)                      \
   X(wall_density, float, 1, "wall", true, true, fields_.density.cur(cur) + nf, nw)            \
   X(wall_density_prev, float, 1, "wall", true, false, fields_.density_prev.cur(cur) + nf, nw) \
   X(wall_pressure, float, 1, "wall", false, false, fields_.pressure.cur(cur) + nf, nw)         \
@@ -48,7 +49,8 @@
   X(probe_weight, float, kMaxProbes, probe_w, false)    \
   X(probe_series_count, long long, kMaxProbes, series_n, false) \
   X(probe_series_time, double, kMaxProbes * kProbeSeries, series_t, false) \
-  X(probe_series_pressure, float, kMaxProbes * kProbeSeries, series_p, false)
+  X(probe_series_pressure, float, kMaxProbes * kProbeSeries, series_p, false) \
+  X(body_pose, float, kMaxMovingBodies * kBodyPoseFloats, body_pose, false)
 
 // X(name, C type, count, member of Control)
 #define CPS_SPH_CONTROLS(X) X(acceleration, float, 3, acc)
