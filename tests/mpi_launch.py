@@ -36,7 +36,12 @@ def mpiexec() -> tuple[str, bool]:
 
 def env() -> dict[str, str]:
     e = dict(os.environ)
-    e["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO / "python"), e.get("PYTHONPATH", "")) if p)
+    # the ranks import the corpuscle these tests import (an installed one, or a source tree with
+    # its compiled core), not whatever the repository's python/ holds
+    import corpuscle
+
+    here = str(Path(corpuscle.__file__).resolve().parent.parent)
+    e["PYTHONPATH"] = os.pathsep.join(p for p in (here, e.get("PYTHONPATH", "")) if p)
     # one thread a rank: the ranks share CI's 2 cores
     e.setdefault("OMP_NUM_THREADS", "1")
     e["OMPI_ALLOW_RUN_AS_ROOT"] = e["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
