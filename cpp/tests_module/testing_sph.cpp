@@ -301,9 +301,9 @@ void bind_sph(nb::module_& m) {
       "The hydrostatic density difference rho^H_ji at z_ij (the odd form used, or the published one).");
   m.def(
       "sph_choose_dt_cfl",
-      [](float cfl, float hs, float amax, float c0, float mu_max, float dt_min, float dt_max) {
-        return choose_dt_cfl(cfl, hs, amax, c0, mu_max, dt_min, dt_max);
+      [](float cfl, float hs, float amax, float c0, float mu_max, float dt_min, float dt_max, float nu) {
+        return choose_dt_cfl(cfl, hs, amax, c0, mu_max, nu, dt_min, dt_max);
       },
       nb::arg("cfl"), nb::arg("hs"), nb::arg("amax"), nb::arg("c0"), nb::arg("mu_max"), nb::arg("dt_min"),
-      nb::arg("dt_max"));
+      nb::arg("dt_max"), nb::arg("nu") = 0.0f);
 }

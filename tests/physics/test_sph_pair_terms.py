@@ -389,6 +389,19 @@ def test_choose_dt_cfl_is_the_dualsphysics_form():
     assert testing.sph_choose_dt_cfl(cfl, hs, float("nan"), c0, float("nan"), 1e-5, 1.0) == pytest.approx(1e-5)
 
 
+def test_choose_dt_cfl_viscous_limit():
+    # a laminar nu adds Morris et al.'s (1997) diffusion limit 0.125 hs^2 / nu, not scaled by the
+    # CFL number: it takes over exactly when it is the smallest, and nu = 0 leaves the CFL form
+    cfl, hs, c0 = 0.2, HS, 20.0
+    cfl_dt = cfl * min(hs / c0, math.sqrt(hs / 9.81))
+    nu_cross = 0.125 * hs * hs / cfl_dt  # the viscosity at which both limits are equal
+    for nu in (0.0, 0.5 * nu_cross, 2.0 * nu_cross, 50.0 * nu_cross):
+        expect = cfl_dt if nu == 0.0 else min(cfl_dt, 0.125 * hs * hs / nu)
+        got = testing.sph_choose_dt_cfl(cfl, hs, 9.81, c0, 0.0, 1e-12, 1.0, nu)
+        assert got == pytest.approx(expect, rel=1e-6), nu
+    assert testing.sph_choose_dt_cfl(cfl, hs, 9.81, c0, 0.0, 1e-12, 1.0, 2.0 * nu_cross) < cfl_dt
+
+
 @pytest.mark.parametrize("dim", DIMS)
 def test_cfl_mu_max_from_pairs(dim):
     # dt_cv takes max_j |mu_ij| over pairs: for a block, from sph_mu against float64

@@ -99,6 +99,8 @@ struct Model {
   BodyMotion motion[kMaxMovingBodies];
   int n_probes;
   float probes[kMaxProbes * D];
+  // the kinematic viscosity the time step's diffusion limit needs (0 with artificial viscosity)
+  CPS_HD float laminar_nu() const { return viscosity == kLaminarViscosity ? lv.nu0 : 0.0f; }
   CPS_HD Vec<D> probe(int k) const {
     Vec<D> x;
     for (int c = 0; c < D; ++c) x[c] = probes[k * D + c];

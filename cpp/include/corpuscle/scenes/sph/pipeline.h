@@ -395,7 +395,7 @@ class Pipeline {
             {"amax", std::sqrt(double(r.sums.amax2))},
             {"mean_neighbors", nbrs},
             {"chosen_dt", double(choose_dt_cfl(m_.cfl, m_.hs, std::sqrt(r.sums.amax2), m_.c0, r.sums.mu_max,
-                                               m_.dt_min, m_.dt_max))},
+                                               m_.laminar_nu(), m_.dt_min, m_.dt_max))},
             {"n_fluid", double(nf_)},
             {"n_wall", double(n_ - nf_)},
             {"grid_cells", double(grid_.spec().ncells)}};

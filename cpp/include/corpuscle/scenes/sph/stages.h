@@ -348,7 +348,7 @@ struct FinalizeStage {
       return;
     }
     bool last;
-    const float dt = clip_to_end(C, choose_dt_cfl(m.cfl, m.hs, fsqrt(S.amax2), m.c0, S.mu_max, m.dt_min, m.dt_max),
+    const float dt = clip_to_end(C, choose_dt_cfl(m.cfl, m.hs, fsqrt(S.amax2), m.c0, S.mu_max, m.laminar_nu(), m.dt_min, m.dt_max),
                                  last);
     G.sums = S;
     if (G.outside > G.outside_max) G.outside_max = G.outside;
