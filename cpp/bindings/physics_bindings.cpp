@@ -112,7 +112,7 @@ void bind_physics(nb::module_& m) {
       [](std::vector<double> center, std::vector<double> normal, int shape, double size, int samples) {
         const size_t D = center.size();
         if ((D != 2 && D != 3) || normal.size() != D) throw std::invalid_argument("center and normal: 2 or 3 numbers each");
-        if (shape < 0 || shape > 2 || samples < 1) throw std::invalid_argument("shape 0, 1 or 2 and samples >= 1");
+        if (shape < 0 || shape > 3 || samples < 1) throw std::invalid_argument("shape 0, 1, 2 or 3 and samples >= 1");
         double n2 = 0.0;
         for (double x : normal) n2 += x * x;
         if (!(n2 > 0.0)) throw std::invalid_argument("normal must be non-zero");
@@ -133,6 +133,6 @@ void bind_physics(nb::module_& m) {
         return nb::ndarray<nb::numpy, double, nb::ndim<2>>(out, {size_t(ns), D}, owner);
       },
       nb::arg("center"), nb::arg("normal"), nb::arg("shape"), nb::arg("size"), nb::arg("samples"),
-      "The sample points (samples x dim, float64 of the core's float32) of a probe: shape 0 point, 1 disc, 2 square "
-      "(scenes/sph/probe.h).");
+      "The sample points (samples x dim, float64 of the core's float32) of a probe: shape 0 point, 1 disc, 2 square, "
+      "3 gauge (scenes/sph/probe.h).");
 }

@@ -318,7 +318,7 @@ class Simulation:
     def probe_series(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """A probe's series (the SPH box kinds' [[probes]]): times (s) and pressures (Pa) of
         every sample it took (its `interval`; every step by default) of the states the steps
-        started from."""
+        started from; a gauge's (shape = "gauge"): times and water levels (m above its lower end)."""
         if not hasattr(self.kind, "probe_series"):
             raise ValueError(f"{self.kind.name} has no probes")
         return self.kind.probe_series(self, name)
@@ -328,6 +328,9 @@ class Simulation:
         series, interpolated at the window's ends."""
         from .kinds._sph_box import pressure_impulse
 
+        gauges = dict(zip(self.info.get("probe_names", []), self.info.get("probe_gauges", [])))
+        if gauges.get(name):
+            raise ValueError(f"probe {name!r} is a water-level gauge: it has no pressure impulse")
         t, p = self.probe_series(name)
         return pressure_impulse(t, p, float(t0), float(t1))
 

@@ -30,7 +30,7 @@ from ..schema import INT64_MAX, CrossCheck, KeySpec, SceneError, SceneKind, _fmt
 from . import Build, Kind, Target, check_memory, core, key_values
 from ._sph_bodies import MAX_BODIES, body_keys, build_bodies, check_bodies, header_obstacles, moving_arrays
 from ._sph_probes import (PROBE_SERIES, ProbeSeries, _check_probe_faces, _check_probes, _probes_inside,  # noqa: F401
-                          pressure_impulse, probe_face_params, probe_face_reach, probe_keys, probe_sample_points,
+                          is_gauge, pressure_impulse, probe_face_params, probe_face_reach, probe_keys, probe_sample_points,
                           probe_samples_of)
 
 KERNELS = {"wendland": 4, "cubic-spline": 3, "poly6-spiky": 0}
@@ -334,6 +334,7 @@ class SphBox(Kind):
                 "gamma": gamma, "gravity": g, "layers": layers, "box": box_hi.copy(), "fluid_height": height,
                 "fluid_lo": f0 * dp, "fluid_hi": f1 * dp, "n_fluid": nf_est, "n_wall": int(box_cells),
                 "probe_names": [str(p["name"]) for p in scene.arrays.get("probes", [])],
+                "probe_gauges": [is_gauge(p) for p in scene.arrays.get("probes", [])],
                 "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D),
                 "periodic": [a for a in "xyz"[:D] if a in v["boundary.periodic"]],
                 "moving_walls": list(v["walls.moving"]), "wall_speed": list(map(float, v["walls.velocity"])),
@@ -372,12 +373,20 @@ class SphBox(Kind):
 
     # reading -----------------------------------------------------------------------------
     def probes(self, sim, s: dict[str, Any] | None = None) -> dict[str, dict[str, Any]]:
-        """name -> {position, pressure, velocity, weight} of the probes (the state at probe_time)."""
+        """name -> {position, pressure, velocity, weight} of the probes (the state at probe_time);
+        a gauge's: {position (its lower end), level (m above it), elevation (its height coordinate),
+        weight (the filling at its lower end)}."""
         s = sim.core.scalars() if s is None else s
         out = {}
         p, vel, w = s["probe_pressure"], s["probe_velocity"], s["probe_weight"]
         nan = float("nan")
+        gauges = sim.info.get("probe_gauges") or [False] * len(sim.info["probe_names"])
         for k, name in enumerate(sim.info["probe_names"]):
+            if gauges[k]:
+                x0 = sim.info["probe_positions"][k]
+                out[name] = {"position": x0.tolist(), "level": float(p[k]),
+                             "elevation": float(x0[-1]) + float(p[k]), "weight": float(w[k])}
+                continue
             # no particle within the kernel's support: nothing measured (NaN; null in JSON), not 0
             seen = float(w[k]) > 0.0
             out[name] = {"position": sim.info["probe_positions"][k].tolist(),
@@ -405,20 +414,22 @@ class SphBox(Kind):
 
     def frame(self, sim, ghosts: bool = False, velocity: bool = False) -> dict[str, Any]:
         """The frame, with each probe's samples since the last frame (group probe.<name>:
-        fields probe.<name>.time (s), probe.<name>.pressure (Pa) and probe.<name>.position,
-        the probe's centre for each sample)."""
+        fields probe.<name>.time (s), probe.<name>.pressure (Pa; a gauge's: probe.<name>.level,
+        m) and probe.<name>.position, the probe's centre for each sample)."""
         rec = super().frame(sim, ghosts=ghosts, velocity=velocity)
         if sim.info["probe_names"]:
             ser = self._probe_series(sim)
+            gauges = sim.info.get("probe_gauges") or [False] * len(ser.names)
             for k, name in enumerate(ser.names):
+                value = "level" if gauges[k] else "pressure"
                 t, p = ser.t[k][ser.recorded[k]:], ser.p[k][ser.recorded[k]:]
                 ser.recorded[k] = len(ser.t[k])
                 centre = np.asarray(sim.info["probe_positions"][k], dtype=np.float32)
                 # (each sample at the probe's centre: a group of points any reader or exporter places)
                 rec["fields"][f"probe.{name}.position"] = np.tile(centre, (len(t), 1))
                 rec["fields"][f"probe.{name}.time"] = np.asarray(t, dtype=np.float64)
-                rec["fields"][f"probe.{name}.pressure"] = np.asarray(p, dtype=np.float32)
-                for f in ("position", "time", "pressure"):
+                rec["fields"][f"probe.{name}.{value}"] = np.asarray(p, dtype=np.float32)
+                for f in ("position", "time", value):
                     rec["groups"][f"probe.{name}.{f}"] = f"probe.{name}"
         return rec
 
@@ -441,6 +452,9 @@ class SphBox(Kind):
         out["probe_time"] = st["probe_time"]
         axes = "xyz"[:self.dim]
         for name, p in st["probes"].items():
+            if "level" in p:  # a gauge
+                out[f"probe_{name}_level"] = p["level"]
+                continue
             out[f"probe_{name}_p"] = p["pressure"]
             for a, x in zip(axes, p["velocity"]):
                 out[f"probe_{name}_v{a}"] = x
@@ -491,6 +505,12 @@ class SphBox(Kind):
                                "outside_max": st["outside_max"]}
         series = self._series.get(sim, {})
         for name in sim.info["probe_names"]:
+            if "level" in st["probes"][name]:  # a gauge: its highest recorded level and the last
+                lv = np.asarray(series.get(f"probe_{name}_level", []), dtype=np.float64)
+                if lv.size:
+                    out[f"probe_{name}_level_max"] = float(np.max(lv))
+                out[f"probe_{name}_level"] = st["probes"][name]["level"]
+                continue
             ps = np.asarray(series.get(f"probe_{name}_p", []), dtype=np.float64)
             ps = ps[np.isfinite(ps)]  # the records that measured something
             if ps.size:

@@ -1,5 +1,5 @@
 """The SPH box kinds' probes: the ``[[probes]]`` table (points and faces: discs or squares on a
-wall, area-averaged), their checks, the sample points of a face, the series drained from the
+wall, area-averaged; water-level gauges: vertical lines), their checks, the sample points of a face, the series drained from the
 core, and the pressure impulse over a window (docs/sph_box.md, "Probes")."""
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ def probe_keys(dim: int) -> dict[str, KeySpec]:
 
 
 # ---- probes as the experiments have them (scenes/sph/probe.h) ---------------------------------
-PROBE_SHAPES = {"point": 0, "disc": 1, "square": 2}
+PROBE_SHAPES = {"point": 0, "disc": 1, "square": 2, "gauge": 3}
 PROBE_MAX_SAMPLES = 4096  # kMaxProbeSamples of scenes/sph/probe.h
 PROBE_SERIES = 32  # kProbeSeries of scenes/sph/model.h: samples per probe between drains
 
@@ -33,13 +33,14 @@ def probe_face_keys(dim: int) -> dict[str, KeySpec]:
     sensor's membrane, area-averaged), sampled on its own interval."""
     return {
         "shape": _K("enum", "point", "", doc="point, or a face: disc (diameter size) or square (side size); "
-                    "in 2-D both are a segment of length size across the normal", choices=tuple(PROBE_SHAPES)),
-        "size": _K("float", 0.0, "m", 0.0, 1e3, "a face's diameter (disc) or side (square)"),
+                    "in 2-D both are a segment of length size across the normal; or gauge: a water-level gauge, "
+                    "the vertical line from position up by size", choices=tuple(PROBE_SHAPES)),
+        "size": _K("float", 0.0, "m", 0.0, 1e3, "a face's diameter (disc) or side (square); a gauge's length"),
         "normal": _K(f"vec{dim}", [1.0] + [0.0] * (dim - 1), "", -1e3, 1e3,
                      "the face's normal (any length; a sensor on the wall x = L: [1, 0] or [-1, 0])"),
         "samples": _K("int", 0, "", 0, PROBE_MAX_SAMPLES,
-                      "sample points spread over the face's area (3-D square: a square number); 0: from the "
-                      "spacing (at most dp / 2 apart)"),
+                      "sample points spread over the face's area (3-D square: a square number) or along a "
+                      "gauge (2 or more, both ends included); 0: from the spacing (at most dp / 2 apart)"),
         "interval": _K("float", 0.0, "s", 0.0, 1e7, "time between the probe's samples (0: every step)"),
     }
 
@@ -53,6 +54,8 @@ def probe_samples_of(p: dict[str, Any], dim: int, dp: float | None) -> int:
     if n:
         return n
     per = max(1, math.ceil(2.0 * float(p["size"]) / dp)) if dp else 4  # at most dp / 2 apart
+    if shape == "gauge":
+        return min(per + 1, PROBE_MAX_SAMPLES)
     if dim == 2:
         n = per
     elif shape == "square":
@@ -79,6 +82,14 @@ def _check_probe_faces(values, arrays) -> None:
             continue
         if not float(p.get("size", 0.0)) > 0.0:
             raise SceneError(f"{where}.size = {_fmt_value(p.get('size', 0.0))}: a {shape} probe needs a size > 0 (m)")
+        if shape == "gauge":
+            if int(p.get("samples", 0)) == 1:
+                raise SceneError(f"{where}.samples = 1: a gauge samples its line at 2 points or more (0: from the spacing)")
+            n = np.asarray(p.get("normal", [1.0] + [0.0] * (dim - 1)), dtype=np.float64)
+            if not (np.allclose(n, gauge_axis(dim)) or np.allclose(n, [1.0] + [0.0] * (dim - 1))):
+                raise SceneError(f"{where}.normal = {_fmt_value(p.get('normal'))}: a gauge is vertical (from its "
+                                 f"position up by its size); leave normal out")
+            continue
         n = np.asarray(p.get("normal"), dtype=np.float64)
         if not np.all(np.isfinite(n)) or not float(np.dot(n, n)) > 0.0:
             raise SceneError(f"{where}.normal = {_fmt_value(p.get('normal'))}: a face needs a non-zero normal")
@@ -87,11 +98,28 @@ def _check_probe_faces(values, arrays) -> None:
             raise SceneError(f"{where}.samples = {ns}: a square face's samples form a k x k grid (a square number)")
 
 
+def gauge_axis(dim: int) -> list[float]:
+    """A gauge's axis: up (+y in 2-D, +z in 3-D)."""
+    return [0.0] * (dim - 1) + [1.0]
+
+
+def is_gauge(p: dict[str, Any]) -> bool:
+    return p.get("shape", "point") == "gauge"
+
+
+def probe_normal(p: dict[str, Any], dim: int) -> list[float]:
+    """The unit normal of a face (a gauge: its axis, up) as the core takes it."""
+    if is_gauge(p):
+        return gauge_axis(dim)
+    n = np.asarray(p.get("normal", [1.0] + [0.0] * (dim - 1)), dtype=np.float64)
+    return (n / math.sqrt(float(np.dot(n, n))) if float(np.dot(n, n)) > 0 else n).tolist()
+
+
 def probe_face_reach(p: dict[str, Any]) -> np.ndarray:
     """How far a face reaches from its centre along each axis: (size / 2) sqrt(1 - n_a^2)
     (a disc, and the 2-D segment), sqrt 2 times that for a 3-D square (its corners, whatever
     the turn of its sides about the normal); 0 for a point."""
-    if p.get("shape", "point") == "point":
+    if p.get("shape", "point") in ("point", "gauge"):  # a gauge reaches up: gauge_top
         return np.zeros(len(p["position"]))
     n = np.asarray(p["normal"], dtype=np.float64)
     n = n / math.sqrt(float(np.dot(n, n)))
@@ -104,8 +132,7 @@ def probe_face_params(arrays, dim: int, dp: float) -> dict[str, list[float]]:
     probes = arrays.get("probes", [])
     normal = []
     for p in probes:
-        n = np.asarray(p.get("normal", [1.0] + [0.0] * (dim - 1)), dtype=np.float64)
-        normal += (n / math.sqrt(float(np.dot(n, n))) if float(np.dot(n, n)) > 0 else n).tolist()
+        normal += probe_normal(p, dim)
     return {"probe_shape": [float(PROBE_SHAPES[p.get("shape", "point")]) for p in probes],
             "probe_size": [float(p.get("size", 0.0)) for p in probes],
             "probe_normal": normal,
@@ -115,8 +142,7 @@ def probe_face_params(arrays, dim: int, dp: float) -> dict[str, list[float]]:
 
 def probe_sample_points(p: dict[str, Any], dim: int, dp: float | None) -> np.ndarray:
     """A probe's sample points (samples x dim, the core's own: scenes/sph/probe.h)."""
-    n = p.get("normal", [1.0] + [0.0] * (dim - 1))
-    return core().probe_samples([float(x) for x in p["position"]], [float(x) for x in n],
+    return core().probe_samples([float(x) for x in p["position"]], probe_normal(p, dim),
                                 PROBE_SHAPES[p.get("shape", "point")], float(p.get("size", 0.0)),
                                 probe_samples_of(p, dim, dp))
 
@@ -193,6 +219,13 @@ def _probes_inside(box: Callable[[dict[str, Any]], Any]) -> CrossCheck:
             if not np.all((x >= 0.0) & (x <= size)):
                 raise SceneError(f"probes[{k}].position = {_fmt_value(p['position'])} ({p['name']!r}) is outside the "
                                  f"tank (0 .. {_fmt_value(size.tolist())} m): a probe there measures nothing")
+            if is_gauge(p):
+                top = x[-1] + float(p["size"])
+                if top > size[-1] * (1 + 1e-9):
+                    raise SceneError(f"probes[{k + 1}].size = {_fmt_value(p['size'])} ({p['name']!r}): the gauge "
+                                     f"from {_fmt_value(p['position'])} up to {top:g} m reaches above the tank "
+                                     f"({size[-1]:g} m)")
+                continue
             reach = probe_face_reach(p)
             if np.any(reach > 0.0) and not np.all((x - reach >= -1e-9 * size) & (x + reach <= size * (1 + 1e-9))):
                 raise SceneError(f"probes[{k + 1}].size = {_fmt_value(p['size'])} ({p['name']!r}): the {p['shape']} "

@@ -133,9 +133,15 @@ def test_spheric_obstacle_scene_builds():
     np.testing.assert_allclose(ob["min"], [2.3955, 0.2985, 0.0], atol=1e-9)
     np.testing.assert_allclose(ob["max"], [2.5565, 0.7015, 0.161], atol=1e-9)
     assert sim.info["n_body_particles"] > 0
-    assert set(h["probes"]) == {"P1", "P2", "P3", "P4"}
+    names = {"P1", "P2", "P3", "P4", "H1", "H2", "H3", "H4"}
+    assert set(h["probes"]) == names
     sim.step(5)
-    assert set(sim.state()["probes"]) == {"P1", "P2", "P3", "P4"}
+    st = sim.state()["probes"]
+    assert set(st) == names
+    # the gauges: H4 in the reservoir reads the column's 0.55 m, H1 to H3 are dry at release
+    assert st["H4"]["level"] == pytest.approx(0.55, abs=0.1 * sim.info["spacing"])
+    for g in ("H1", "H2", "H3"):
+        assert st[g]["level"] < 0.05 * sim.info["spacing"]
 
 
 def test_render_and_export_draw_a_mesh_obstacle(tmp_path):

@@ -197,6 +197,106 @@ def test_cli_bad_probe_is_one_line(tmp_path):
     assert_one_line_error(corpuscle("run", scene, "--steps", "1", "--out", tmp_path / "o.cps"), "size")
 
 
+# ---- water-level gauges (shape = "gauge") -------------------------------------------------------
+
+def _gauge_reference(sim, x0, length, samples):
+    """The level by the header's definition, in float64: the filling C = sum_j W V_j over fluid
+    and wall particles at the samples from x0 up by length; the first fall below 1/2 from the
+    lower end, linearly interpolated."""
+    f = fields(sim)
+    p = sim.params
+    pos = np.concatenate([f["position"], f["wall_position"]]).astype(np.float64)
+    vol = p["mass"] / np.concatenate([f["density"], f["wall_density"]]).astype(np.float64)
+    up = np.zeros(sim.kind.dim)
+    up[-1] = 1.0
+    fill = []
+    for s in range(samples):
+        x = np.asarray(x0, dtype=np.float64) + up * length * s / (samples - 1)
+        d = x - pos
+        w, _ = kernel_grad("wendland", sim.kind.dim, p["h"], d, np.sqrt((d * d).sum(1)))
+        fill.append(float((w * vol).sum()))
+    ds = length / (samples - 1)
+    if fill[0] < 0.5:
+        return 0.0, fill[0]
+    for s in range(1, samples):
+        if fill[s] < 0.5:
+            return ds * (s - 1 + (fill[s - 1] - 0.5) / (fill[s - 1] - fill[s])), fill[0]
+    return length, fill[0]
+
+
+@pytest.mark.parametrize("kind", ["dam-break-2d", "dam-break"])
+def test_gauge_is_the_filling_crossing(kind):
+    # stirred: the surface is ragged, the crossing lies between samples somewhere
+    dim = 2 if kind == "dam-break-2d" else 3
+    col = [0.07, 0.0] if dim == 2 else [0.07, 0.03, 0.0]
+    dry = [0.5, 0.0] if dim == 2 else [0.5, 0.03, 0.0]
+    probes = [{"name": "col", "position": col, "shape": "gauge", "size": 0.35, "samples": 41},
+              {"name": "dry", "position": dry, "shape": "gauge", "size": 0.2}]
+    sim = stirred(small(kind, particles=400 if dim == 2 else 800, probes=probes))
+    sim.evaluate()
+    st = sim.state()["probes"]
+    level, bottom = _gauge_reference(sim, col, 0.35, 41)
+    assert 0.05 < level < 0.35  # the crossing is inside the line, not at an end
+    assert st["col"]["level"] == pytest.approx(level, abs=1e-5)
+    assert st["col"]["weight"] == pytest.approx(bottom, rel=1e-4)
+    assert st["col"]["elevation"] == pytest.approx(col[-1] + st["col"]["level"])
+    assert "pressure" not in st["col"]
+    # a dry floor: the wall layers' half support, C about 1/2 at the floor's face, so the level
+    # is 0 or within a few hundredths of dp of it (the wall densities' scatter)
+    assert st["dry"]["level"] < 0.05 * sim.info["spacing"] and st["dry"]["weight"] < 0.55
+
+
+def test_gauge_reads_a_still_column_height():
+    # unstirred: a still column of height H on the floor reads H within a fraction of dp
+    # (the continuum surface of particles on a lattice: the last row's centres at H - dp/2)
+    sim = small("dam-break-2d", particles=1600,
+                probes=[{"name": "g", "position": [0.073, 0.0], "shape": "gauge", "size": 0.35}])
+    sim.evaluate()
+    H = sim.info["fluid_height"]
+    dp = sim.info["spacing"]
+    assert sim.state()["probes"]["g"]["level"] == pytest.approx(H, abs=0.05 * dp)
+
+
+def test_gauge_series_result_and_frames(tmp_path):
+    from corpuscle.io import Run
+
+    probes = [{"name": "g", "position": [0.3, 0.0], "shape": "gauge", "size": 0.2, "interval": 0.002}]
+    sim = small("dam-break-2d", particles=200, probes=probes)
+    sim.run(until=0.15)
+    t, lv = sim.probe_series("g")
+    assert len(t) > 10 and np.all(np.diff(t) > 0)
+    assert lv[0] == 0.0 and lv.max() > 0.0  # dry until the surge arrives at x = 0.3 m
+    assert np.all((lv >= 0.0) & (lv <= 0.2))
+    with pytest.raises(ValueError, match="gauge"):
+        sim.probe_impulse("g", 0.0, 0.1)
+    assert sim.diagnostics()["probe_g_level"] == pytest.approx(sim.state()["probes"]["g"]["level"])
+    scene = tmp_path / "s.toml"
+    scene.write_text('[scene]\nkind = "dam-break-2d"\n[fluid]\nparticles = 200\n[run]\nrecord_every = 16\n'
+                     '[[probes]]\nname = "g"\nposition = [0.1, 0.0]\nshape = "gauge"\nsize = 0.3\n')
+    out = tmp_path / "o.cps"
+    r = corpuscle("run", scene, "--steps", "40", "--backend", "serial", "--out", out, "--no-progress", "--json")
+    assert r.returncode == 0, r.stderr
+    assert "probe_g_level" in r.stdout
+    levels = np.concatenate([np.asarray(fr["probe.g.level"]) for fr in Run(out)])
+    assert len(levels) == 40 and np.all(levels > 0.0)
+
+
+@pytest.mark.parametrize("entry,words", [
+    ({"size": 0.0}, ["probes[1].size", "gauge"]),
+    ({"size": 0.1, "samples": 1}, ["probes[1].samples", "2 points"]),
+    ({"size": 0.1, "normal": [0.0, -1.0]}, ["probes[1].normal", "vertical"]),
+    ({"size": 5.0}, ["probes[1].size", "above the tank"]),
+])
+def test_bad_gauge_keys(entry, words):
+    probe = {"name": "g", "position": [0.1, 0.0], "shape": "gauge", **entry}
+    with pytest.raises(SceneError) as e:
+        load_scene("dam-break-2d").with_overrides({"probes": [probe]})
+    msg = str(e.value)
+    assert "\n" not in msg
+    for w in words:
+        assert w in msg, msg
+
+
 # ---- the output ---------------------------------------------------------------------------------
 
 def test_series_in_the_cps_and_export(tmp_path):
@@ -236,10 +336,12 @@ def test_cuda_matches_cpu(kind):
         probes = [{"name": "f", "position": [0.146, 0.03, 0.02], "shape": "square", "size": 0.02,
                    "normal": [-1.0, 0.0, 0.0], "samples": 16},
                   {"name": "q", "position": [0.05, 0.03, 0.01], "interval": 0.003}]
+    probes.append({"name": "g", "position": [0.1] + [0.03] * (len(probes[0]["position"]) - 2) + [0.0],
+                   "shape": "gauge", "size": 0.3})
     sims = [small(kind, backend=b, particles=400, probes=probes) for b in ("cpu", "cuda")]
     for s in sims:
         s.step(150)
-    for name in ("f", "q"):
+    for name in ("f", "q", "g"):
         (tc, pc), (tg, pg) = (s.probe_series(name) for s in sims)
         assert len(tc) == len(tg) > 1
         np.testing.assert_allclose(tg, tc, rtol=1e-5)

@@ -45,10 +45,11 @@ inline void build_probe_faces(Model<D>& m, const ParamSource& p, const char* kin
                     "probe_normal " + std::to_string(D) + " per probe");
   for (int q = 0; q < m.n_probes; ++q) {
     const int sh = int(shape[q]), ns = int(samples[q]);
-    if (sh != kProbePoint && sh != kProbeDisc && sh != kProbeSquare)
-      throw Error(k + ": probe_shape must be 0 (point), 1 (disc) or 2 (square), got " + std::to_string(shape[q]));
-    if (ns < 1 || ns > kMaxProbeSamples || (sh == kProbePoint && ns != 1))
-      throw Error(k + ": probe_samples must be 1 to " + std::to_string(kMaxProbeSamples) + " (a point: 1), got " +
+    if (sh != kProbePoint && sh != kProbeDisc && sh != kProbeSquare && sh != kProbeGauge)
+      throw Error(k + ": probe_shape must be 0 (point), 1 (disc), 2 (square) or 3 (gauge), got " +
+                  std::to_string(shape[q]));
+    if (ns < 1 || ns > kMaxProbeSamples || (sh == kProbePoint && ns != 1) || (sh == kProbeGauge && ns < 2))
+      throw Error(k + ": probe_samples must be 1 to " + std::to_string(kMaxProbeSamples) + " (a point: 1, a gauge: 2 or more), got " +
                   std::to_string(samples[q]));
     if (D == 3 && sh == kProbeSquare) {
       const int r = int(std::sqrt(double(ns)) + 0.5);

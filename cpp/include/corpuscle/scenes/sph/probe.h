@@ -19,7 +19,7 @@
 
 namespace cps::sph {
 
-constexpr int kProbePoint = 0, kProbeDisc = 1, kProbeSquare = 2;
+constexpr int kProbePoint = 0, kProbeDisc = 1, kProbeSquare = 2, kProbeGauge = 3;
 constexpr int kMaxProbeSamples = 4096;   // sample points of one face
 
 // two unit tangents of the face with unit normal n (3-D; 2-D: t1 only, the normal turned
@@ -46,6 +46,7 @@ CPS_HD CPS_INLINE void probe_tangents(const float* n, int D, float* t1, float* t
 // sample point s (0 <= s < samples) of a probe centred at c with unit normal n, each point
 // standing for an equal share of the face's area:
 //   point: c (samples = 1);
+//   gauge: `samples` points from c to c + size n (a vertical line: n is its axis);
 //   2-D disc or square: a segment of length `size` across the normal, at the midpoints of
 //     `samples` equal parts;
 //   3-D square (side `size`): the centres of a k x k grid, samples = k^2;
@@ -56,6 +57,11 @@ CPS_HD CPS_INLINE void probe_sample_point(const float* c, const float* n, int sh
                                           float* out) {
   for (int k = 0; k < D; ++k) out[k] = c[k];
   if (shape == kProbePoint || samples < 1) return;
+  if (shape == kProbeGauge) {  // along the axis n from c, both ends included
+    const float t = samples > 1 ? size * float(s) / float(samples - 1) : 0.0f;
+    for (int k = 0; k < D; ++k) out[k] += t * n[k];
+    return;
+  }
   float t1[3] = {0.0f, 0.0f, 0.0f}, t2[3] = {0.0f, 0.0f, 0.0f};
   probe_tangents(n, D, t1, t2);
   float u = 0.0f, v = 0.0f;
@@ -96,11 +102,56 @@ CPS_HD CPS_INLINE ProbeSums<D> probe_shepard(const Model<D>& m, const View& view
   return s;
 }
 
+// A water-level gauge (kProbeGauge; DualSPHysics's GaugeSWL, a wave gauge of a flume): a line
+// from the probe's position along its unit axis (the `normal`: up) of length `size`, sampled at
+// `samples` points from end to end. The filling at a point is the kernel sum over the fluid AND
+// the wall particles, C(x) = sum_j W(x - x_j) V_j: about 1 inside the water and inside the
+// walls' layers (the DBC particles fill the floor under a gauge that starts on it), 1/2 at a
+// free surface, 0 in the air. The level is where C first falls below 1/2 walking up from the
+// lower end, linearly interpolated between the two samples around the crossing: 0 when the
+// lower end is dry, `size` when the line is wet to its top. Spray above the first crossing is
+// not counted, as a resistance or acoustic gauge would not.
+template <int D, class View>
+CPS_HD CPS_INLINE float gauge_fill(const Model<D>& m, const View& view, const Arrays<D>& a, const Vec<D>& x) {
+  const SphKernel<D> w = m.kernels.density;
+  float c = 0.0f;
+  view.gather(-1, x, [&](int j, const Vec<D>&, float r2) { c += w.w_r2(r2) * (m.mass / a.density[j]); });
+  return c;
+}
+template <int D, class View>
+CPS_HD CPS_INLINE float gauge_level(const Model<D>& m, const View& view, const Arrays<D>& a, int k, float& bottom) {
+  const int ns = m.probe_samples[k];
+  const float len = m.probe_size[k];
+  const float ds = ns > 1 ? len / float(ns - 1) : 0.0f;
+  auto at = [&](int s) {
+    float xs[D];
+    probe_sample_point<D>(m.probes + k * D, m.probe_normal + k * D, kProbeGauge, len, ns, s, xs);
+    Vec<D> x;
+    for (int q = 0; q < D; ++q) x[q] = xs[q];
+    return gauge_fill(m, view, a, x);
+  };
+  float prev = at(0);
+  bottom = prev;
+  if (!(prev >= 0.5f)) return 0.0f;
+  for (int s = 1; s < ns; ++s) {
+    const float f = at(s);
+    if (f < 0.5f) return ds * (float(s - 1) + (prev - 0.5f) / (prev - f));
+    prev = f;
+  }
+  return len;
+}
+
 // probe k's reading: the mean over its sample points of the interpolated pressure and
-// velocity (a dry point reads 0), and the mean Shepard sum (0: no point saw fluid)
+// velocity (a dry point reads 0), and the mean Shepard sum (0: no point saw fluid); a gauge:
+// its level in p, its lower end's filling in weight, no velocity
 template <int D, class View>
 CPS_HD CPS_INLINE void probe_reading(const Model<D>& m, const View& view, const Arrays<D>& a, int nf, int k, float& p,
                                      float* vel, float& weight) {
+  if (m.probe_shape[k] == kProbeGauge) {  // the level (m along the axis) in the pressure's place
+    p = gauge_level(m, view, a, k, weight);
+    for (int q = 0; q < 3; ++q) vel[q] = 0.0f;
+    return;
+  }
   const int ns = m.probe_shape[k] == kProbePoint ? 1 : m.probe_samples[k];
   const float* c = m.probes + k * D;
   const float* n = m.probe_normal + k * D;
