@@ -618,11 +618,14 @@ def fluid_clear(bodies: Sequence[Body], points, dp: float, layers: int) -> np.nd
         near = np.flatnonzero(np.all((p >= lo - margin) & (p <= hi + margin), axis=1))
         if near.size == 0:
             continue
+        # (a point exactly half a spacing off a face, as the lattice puts it beside a face on a
+        # cell boundary, is kept: the sign of the rounding would otherwise differ face to face)
+        half = 0.5 * dp * (1.0 - 1e-9)
         if b.closed:
-            blocked = _where_sd(b, p[near], lambda sd: sd < 0.5 * dp, -math.inf, 0.5 * dp, 4.0 * dp)
+            blocked = _where_sd(b, p[near], lambda sd: sd < half, -math.inf, 0.5 * dp, 4.0 * dp)
         else:
             deep = (layers + 0.5) * dp
-            blocked = _where_sd(b, p[near], lambda sd: (sd < 0.5 * dp) & (sd > -deep), -deep, 0.5 * dp, 4.0 * dp)
+            blocked = _where_sd(b, p[near], lambda sd: (sd < half) & (sd > -deep), -deep, 0.5 * dp, 4.0 * dp)
         keep[near[blocked]] = False
     return keep
 
