@@ -207,7 +207,8 @@ def test_the_tank_floor_holds_a_heavy_body():
 
 
 def test_the_3d_scene_runs_and_floats():
-    sim = Simulation(load_scene("floating-box").with_overrides({"run.end_time": 0.05}), "cpu")
+    sim = Simulation(load_scene("floating-box").with_overrides({"run.end_time": 0.05, "fluid.spacing": 0.025}),
+                     "cpu")
     assert sim.info["free_bodies"] == ["box"]
     z0 = pose(sim)["position"][2]
     sim.run(until=0.05)
