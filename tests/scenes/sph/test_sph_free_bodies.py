@@ -305,3 +305,24 @@ def test_cuda_archimedes():
     if not Simulation.cuda_available():
         pytest.skip("no CUDA")
     check_archimedes(box2d("cuda", particles=4800, end_time=2.5), 1.5)
+
+
+def test_3d_mass_and_inertia_in_the_body_frame():
+    # a turned box: its inertia in its own frame is the box's principal one, its centre of mass
+    # its centre, whatever the rotation
+    sc = load_scene("floating-box").with_overrides({
+        "run.end_time": 0.01, "fluid.spacing": 0.025,
+        "bodies": [{"name": "box", "shape": "box", "size": [0.1, 0.05, 0.04], "position": [0.25, 0.25, 0.3],
+                    "rotation": [10.0, -20.0, 30.0], "density": 400.0, "motion": "free"}]})
+    sim = Simulation(sc, "serial")
+    p = sim.params
+    m = 400.0 * 0.1 * 0.05 * 0.04
+    a, b, c = 0.1, 0.05, 0.04
+    want = m / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+    assert p["body_free"][0] == pytest.approx(m, rel=1e-12)
+    np.testing.assert_allclose(np.reshape(p["body_free"][1:10], (3, 3)), want, rtol=0, atol=1e-12 * want.max())
+    np.testing.assert_allclose(p["body_motion"][3:6], [0.25, 0.25, 0.3], rtol=0, atol=1e-12)
+    # its particles sit at R r + c at the start, the rotation the entry's
+    R = pose(sim)["rotation"]
+    from corpuscle.geometry import rotation_matrix
+    np.testing.assert_allclose(R, rotation_matrix([10.0, -20.0, 30.0]), rtol=0, atol=1e-6)
