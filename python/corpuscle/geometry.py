@@ -78,14 +78,18 @@ def body_keys(dim: int) -> dict[str, KeySpec]:
         "open": _K("bool", False, "", doc="shape = mesh: accept an open mesh as a thin wall (its inside is behind "
                    "its faces)"),
         "density": _K("float", 0.0, "kg/m^3", 0.0, 1e7,
-                      "the body's density (its mass and inertia; motion = free needs it)"),
+                      "the body's density (its mass and inertia; motion = free needs it or mass)"),
+        "mass": _K("float", 0.0, "kg", 0.0, 1e12,
+                   "motion = free: the body's mass instead of density (2-D: per metre of depth)"),
         "motion": _K("enum", "fixed", "", doc="fixed, velocity (velocity and angular_velocity), table (motion_file) "
                      "or free (moved by the fluid and gravity)", choices=MOTIONS),
-        "velocity": _K(vec, [0.0] * dim, "m/s", -1e4, 1e4, "motion = velocity: the constant velocity"),
+        "velocity": _K(vec, [0.0] * dim, "m/s", -1e4, 1e4, "motion = velocity: the constant velocity (free: the initial one)"),
         "angular_velocity": (_K("vec3", [0.0, 0.0, 0.0], "deg/s", -1e6, 1e6,
-                                "motion = velocity: turns per second about the fixed axes, through position")
+                                "motion = velocity: turns per second about the fixed axes, through position "
+                                "(free: the initial rate)")
                              if dim == 3 else
-                             _K("float", 0.0, "deg/s", -1e6, 1e6, "motion = velocity: counter-clockwise turn rate")),
+                             _K("float", 0.0, "deg/s", -1e6, 1e6,
+                                "motion = velocity: counter-clockwise turn rate (free: the initial one)")),
         "motion_file": _K("path", "", "", doc="motion = table: a CSV of rows t, x, y[, z], angle(s) in degrees "
                           "(the body's position and rotation at time t), interpolated linearly"),
     }
@@ -142,10 +146,16 @@ def check_bodies(arrays: dict[str, list[dict[str, Any]]], dim: int, *, array: st
         if motion != "table" and b["motion_file"]:
             raise SceneError(f"{where}.motion_file is only read for motion = \"table\", got motion = "
                              f"{_fmt_value(motion)}")
+        if b["mass"] > 0.0 and motion != "free":
+            raise SceneError(f"{where}.mass = {_fmt_value(b['mass'])} is only read for motion = \"free\", got "
+                             f"motion = {_fmt_value(motion)}")
         if motion == "free":
-            if b["density"] <= 0.0:
-                raise SceneError(f"{where}.density must be > 0 for motion = \"free\" (its mass and inertia), "
-                                 f"got {_fmt_value(b['density'])}")
+            if b["mass"] > 0.0 and b["density"] > 0.0:
+                raise SceneError(f"{where}.mass = {_fmt_value(b['mass'])} and density = {_fmt_value(b['density'])}: "
+                                 f"give one of them for motion = \"free\"")
+            if b["density"] <= 0.0 and b["mass"] <= 0.0:
+                raise SceneError(f"{where}.density must be > 0 for motion = \"free\" (its mass and inertia; or give "
+                                 f"mass), got {_fmt_value(b['density'])}")
             if shape == "plane" or b["open"]:
                 raise SceneError(f"{where}.motion = \"free\" needs a closed body (an open one has no mass), "
                                  f"got shape = {_fmt_value(shape)}{', open = true' if b['open'] else ''}")
@@ -608,11 +618,14 @@ def fluid_clear(bodies: Sequence[Body], points, dp: float, layers: int) -> np.nd
         near = np.flatnonzero(np.all((p >= lo - margin) & (p <= hi + margin), axis=1))
         if near.size == 0:
             continue
+        # (a point exactly half a spacing off a face, as the lattice puts it beside a face on a
+        # cell boundary, is kept: the sign of the rounding would otherwise differ face to face)
+        half = 0.5 * dp * (1.0 - 1e-9)
         if b.closed:
-            blocked = _where_sd(b, p[near], lambda sd: sd < 0.5 * dp, -math.inf, 0.5 * dp, 4.0 * dp)
+            blocked = _where_sd(b, p[near], lambda sd: sd < half, -math.inf, 0.5 * dp, 4.0 * dp)
         else:
             deep = (layers + 0.5) * dp
-            blocked = _where_sd(b, p[near], lambda sd: (sd < 0.5 * dp) & (sd > -deep), -deep, 0.5 * dp, 4.0 * dp)
+            blocked = _where_sd(b, p[near], lambda sd: (sd < half) & (sd > -deep), -deep, 0.5 * dp, 4.0 * dp)
         keep[near[blocked]] = False
     return keep
 

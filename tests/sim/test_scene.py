@@ -376,7 +376,8 @@ def test_unknown_scene():
     with pytest.raises(SceneError) as e:
         load_scene("foo")
     assert str(e.value) == ("unknown scene 'foo' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, "
-                            "dam-break-obstacle, fluid-box, lid-driven-cavity, magic8ball, piston-wave-maker, poiseuille, "
+                            "dam-break-obstacle, floating-box, floating-box-2d, fluid-box, lid-driven-cavity, magic8ball, "
+                            "piston-wave-maker, poiseuille, "
                             "taylor-green, wind-tunnel, wind-tunnel-3d)")
 
 

@@ -7,8 +7,13 @@ placed inside a body or within half a spacing of it. The body particles join the
 A moving body (``motion = "velocity"`` or ``"table"``) is rigid: the core sets its particles
 from its pose each step (cpp/include/corpuscle/scenes/sph/bodies.h), each particle keeping its
 offset in the body's frame; its pose at t = 0 is where it is built (for a table, the table's
-pose at t = 0, not ``position`` and ``rotation``). ``motion = "free"`` is refused with one line
-(free bodies are not in the core yet)."""
+pose at t = 0, not ``position`` and ``rotation``).
+
+A free body (``motion = "free"``, DualSPHysics's floating body) moves with the force and torque
+of the fluid on its particles, gravity and the tank's contact (bodies.h): its reference point is
+its centre of mass, its mass and inertia those of its shape at its ``density`` (or ``mass``:
+geometry.mass_properties), its initial velocity and angular velocity the entry's ``velocity``
+and ``angular_velocity``."""
 
 from __future__ import annotations
 
@@ -25,11 +30,11 @@ from ..schema import CrossCheck, SceneError, _fmt_value
 #: the most [[bodies]] entries of an SPH box scene
 MAX_BODIES = 64
 #: the motions the SPH box kinds support
-MOTIONS = ("fixed", "velocity", "table")
+MOTIONS = ("fixed", "velocity", "table", "free")
 #: the most moving bodies of a scene (kMaxMovingBodies of scenes/sph/bodies.h)
 MAX_MOVING = 16
 #: body_motion's kind codes (bodies.h)
-MOTION_CODES = {"velocity": 1, "table": 2}
+MOTION_CODES = {"velocity": 1, "table": 2, "free": 3}
 #: the times a moving body is checked to stay in the tank at (besides its table's rows)
 CHECK_SAMPLES = 401
 
@@ -87,6 +92,39 @@ class Motion:
         return np.union1d(t, rows[(rows > 0.0) & (rows < end_time)])
 
 
+class FreeMotion(Motion):
+    """A free body's start as the core takes it (bodies.h's free_body_start): its centre of
+    mass, rotation (degrees), velocity and angular velocity (rad/s), and its mass and inertia
+    tensor about the centre of mass in its own frame (2-D: Izz times the identity)."""
+
+    def __init__(self, entry: dict[str, Any], dim: int, label: str, body):
+        super().__init__({**entry, "motion": "velocity"}, dim, label)
+        self.kind = MOTION_CODES["free"]
+        volume = geometry.mass_properties(body, 1.0)["volume"]
+        density = float(entry["density"]) if entry["density"] > 0.0 else float(entry["mass"]) / volume
+        props = geometry.mass_properties(body, density)
+        self.mass = float(props["mass"])
+        self.c0 = [float(x) for x in props["center"]] + [0.0] * (3 - dim)
+        if dim == 2:
+            self.inertia = float(props["inertia"]) * np.eye(3)
+        else:
+            R0 = geometry.rotation_matrix(entry["rotation"])
+            self.inertia = R0.T @ np.asarray(props["inertia"], dtype=np.float64) @ R0
+        self.density = density
+
+    def pose(self, t: float):
+        """(c, R, velocity, angular velocity) at t = 0 (later poses are the run's: its record)."""
+        p = np.asarray(core().sph_body_pose(MOTION_CODES["velocity"], self.c0, self.a0, self.velocity, self.omega,
+                                            self.table, 0.0), dtype=np.float64)
+        return p[0:3], p[3:12].reshape(3, 3), p[12:15], p[15:18]
+
+    def free_params(self) -> list[float]:
+        return [self.mass, *np.asarray(self.inertia, dtype=np.float64).ravel().tolist()]
+
+    def times(self, end_time: float) -> np.ndarray:
+        return np.zeros(1)
+
+
 def _pose_body(b, c: np.ndarray, R: np.ndarray) -> None:
     """Place body b with its reference point at c and rotation R (3-D; 2-D: their first axes)."""
     D = b.dim
@@ -104,6 +142,9 @@ def posed_bodies(arrays: dict[str, list], dim: int) -> tuple[list, list]:
     for k, (b, entry) in enumerate(zip(bodies, arrays.get("bodies", [])), start=1):
         if entry["motion"] == "fixed":
             motions.append(None)
+            continue
+        if entry["motion"] == "free":  # (placed where its entry puts it; its reference: the centre of mass)
+            motions.append(FreeMotion(entry, dim, f"bodies[{k}]", b))
             continue
         m = Motion(entry, dim, f"bodies[{k}]")
         c, R, _, _ = m.pose(0.0)
@@ -205,7 +246,21 @@ def moving_arrays(motions: list, owner: np.ndarray, body_pts: np.ndarray, n_wall
     arrays = {"wall_body": wall_body.reshape(-1, 1), "wall_local": np.ascontiguousarray(local, dtype=np.float32)}
     if row0:
         arrays["body_table"] = np.ascontiguousarray(np.concatenate(tables), dtype=np.float32)
-    return {"n_moving": len(index), "body_motion": numbers}, arrays, index
+    params = {"n_moving": len(index), "body_motion": numbers}
+    if any(isinstance(motions[k], FreeMotion) for k in index):
+        params["body_free"] = [x for k in index for x in
+                               (motions[k].free_params() if isinstance(motions[k], FreeMotion) else [0.0] * 10)]
+    return params, arrays, index
+
+
+def contact_params(spacing: float, h: float, c0: float) -> list[float]:
+    """The tank's contact on the free bodies' particles (bodies.h's tank_contact): from half a
+    spacing off a wall's face (the body's surface at the face), an acceleration k pen - c v_n per
+    particle with omega = c0 / h (k = omega^2, c = omega): the stiffness of the fluid's own
+    pressure response over a support radius, resolved by the CFL step (omega dt <= 0.1 at
+    timestep.cfl = 0.2), damped at half the critical rate of one particle."""
+    w = c0 / h
+    return [0.5 * spacing, w * w, w]
 
 
 def header_obstacles(bodies: list, motions: list | None = None) -> list[dict[str, Any]]:

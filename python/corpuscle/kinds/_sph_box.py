@@ -28,7 +28,8 @@ import numpy as np
 
 from ..schema import INT64_MAX, CrossCheck, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
-from ._sph_bodies import MAX_BODIES, body_keys, build_bodies, check_bodies, header_obstacles, moving_arrays
+from ._sph_bodies import (MAX_BODIES, body_keys, build_bodies, check_bodies, contact_params, header_obstacles,
+                          moving_arrays)
 from ._sph_probes import (PROBE_SERIES, ProbeSeries, _check_probe_faces, _check_probes, _probes_inside,  # noqa: F401
                           is_gauge, pressure_impulse, probe_face_params, probe_face_reach, probe_keys, probe_sample_points,
                           probe_samples_of)
@@ -303,6 +304,8 @@ class SphBox(Kind):
         # moving bodies: the core sets their particles from their poses (scenes/sph/bodies.h)
         moving_params, moving, moving_index = moving_arrays(motions, owner, body_pts, len(wall), D)
         params.update(moving_params)
+        if "body_free" in moving_params:  # free bodies: the tank's contact (_sph_bodies.contact_params)
+            params["body_contact"] = contact_params(dp, h, c0)
         top = float(f1[-1] * dp)
         near = np.all((wall[:, :-1] > (f0[:-1] - layers) * dp) & (wall[:, :-1] < (f1[:-1] + layers) * dp), axis=1)
         wall_rho = np.where(near, hydrostatic_density(top - wall[:, -1], rho0, B, gamma, g), rho0)
@@ -340,7 +343,8 @@ class SphBox(Kind):
                 "moving_walls": list(v["walls.moving"]), "wall_speed": list(map(float, v["walls.velocity"])),
                 "body_force": list(map(float, v["fluid.body_force"])),
                 "n_body_particles": int(len(body_pts)), "obstacles": header_obstacles(bodies, motions),
-                "moving_bodies": [bodies[k].name for k in moving_index], "moving_obstacles": moving_index}
+                "moving_bodies": [bodies[k].name for k in moving_index], "moving_obstacles": moving_index,
+                "free_bodies": [bodies[k].name for k in moving_index if scene.arrays["bodies"][k]["motion"] == "free"]}
         info.update(self.extra_info(v, info))
         return Build(params, arrays, info)
 
@@ -469,15 +473,17 @@ class SphBox(Kind):
         return {}
 
     def body_poses(self, sim, s: dict[str, Any] | None = None) -> dict[str, dict[str, np.ndarray]]:
-        """name -> {position, rotation (3 x 3), velocity, angular_velocity (rad/s)} of each moving
-        body at the state's time (the core's record, scenes/sph/bodies.h)."""
+        """name -> {position, rotation (3 x 3), velocity, angular_velocity (rad/s), force, torque}
+        of each moving body at the state's time (the core's record, scenes/sph/bodies.h; force and
+        torque: a free body's, of the fluid and the tank's contact in the last step's state)."""
         s = sim.core.scalars() if s is None else s
         pose = np.asarray(s.get("body_pose", []), dtype=np.float64).reshape(-1, 18)
+        force = np.asarray(s.get("body_force", np.zeros(6 * len(pose))), dtype=np.float64).reshape(-1, 6)
         out = {}
         for j, name in enumerate(sim.info.get("moving_bodies", [])):
             p = pose[j]
             out[name] = {"position": p[0:3], "rotation": p[3:12].reshape(3, 3), "velocity": p[12:15],
-                         "angular_velocity": p[15:18]}
+                         "angular_velocity": p[15:18], "force": force[j, 0:3], "torque": force[j, 3:6]}
         return out
 
     def body_diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:
@@ -490,6 +496,11 @@ class SphBox(Kind):
                 out[f"body_{name}_{a}"] = float(p["position"][k])
                 out[f"body_{name}_v{a}"] = float(p["velocity"][k])
             R = p["rotation"]
+            if name in sim.info.get("free_bodies", ()):  # the fluid's and the contact's force on it
+                for k, a in enumerate(axes):
+                    out[f"body_{name}_f{a}"] = float(p["force"][k])
+                if self.dim == 2:
+                    out[f"body_{name}_torque"] = float(p["torque"][2])
             if self.dim == 2:
                 out[f"body_{name}_angle"] = math.degrees(math.atan2(R[1, 0], R[0, 0]))
             else:

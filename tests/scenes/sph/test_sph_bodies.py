@@ -180,7 +180,7 @@ def write_scene(tmp_path, body: str) -> str:
 @pytest.mark.parametrize("body, words", [
     ('shape = "circle"\nradius = 0.05\nposition = [5.0, 0.1]\n', "bodies[1] ('body1') reaches outside the tank"),
     ('shape = "box"\nsize = [0.1, 0.1]\nposition = [0.1, 0.1]\nbogus = 3\n', "bodies[1].bogus"),
-    ('shape = "circle"\nradius = 0.05\nposition = [0.3, 0.1]\nmotion = "free"\ndensity = 500.0\n',
+    ('shape = "circle"\nradius = 0.05\nposition = [0.3, 0.1]\nmotion = "floating"\ndensity = 500.0\n',
      "bodies[1].motion"),
     ('shape = "sphere"\nradius = 0.05\n', "bodies[1].shape"),
 ])

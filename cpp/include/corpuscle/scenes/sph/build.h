@@ -146,6 +146,7 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   // moving bodies (bodies.h): per body kind, row0, rows, c0 (3), a0 (3, degrees), velocity (3),
   // angular velocity (3, rad/s)
   m.n_moving = p.has("n_moving") ? int(p.integer("n_moving")) : 0;
+  m.n_free = 0;
   if (m.n_moving < 0 || m.n_moving > kMaxMovingBodies)
     throw Error(std::string(kind) + ": " + std::to_string(m.n_moving) + " moving bodies, at most " + std::to_string(kMaxMovingBodies));
   if (m.n_moving > 0) {
@@ -157,8 +158,8 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
       const double* q = bm.data() + per * b;
       BodyMotion& mo = m.motion[b];
       mo.kind = int(q[0]);
-      if (mo.kind != kBodyVelocity && mo.kind != kBodyTable)
-        throw Error(std::string(kind) + ": body_motion kind must be 1 (velocity) or 2 (table)");
+      if (mo.kind != kBodyVelocity && mo.kind != kBodyTable && mo.kind != kBodyFree)
+        throw Error(std::string(kind) + ": body_motion kind must be 1 (velocity), 2 (table) or 3 (free)");
       mo.row0 = int(q[1]);
       mo.rows = int(q[2]);
       for (int k = 0; k < 3; ++k) {
@@ -167,7 +168,32 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
         mo.vel[k] = q[9 + k];
         mo.omega[k] = q[12 + k];
       }
+      mo.mass = 0.0;
+      for (int k = 0; k < 9; ++k) mo.inertia[k] = 0.0;
+      mo.w0 = mo.nw = 0;
+      if (mo.kind == kBodyFree) m.n_free += 1;
     }
+  }
+  // free bodies (bodies.h): per moving body its mass and inertia in its own frame (10 numbers;
+  // read for the free ones), and the tank's contact: r0 (m), k (1/s^2), c (1/s)
+  if (m.n_free > 0) {
+    auto bf = p.numbers("body_free");
+    if (int(bf.size()) != 10 * m.n_moving)
+      throw Error(std::string(kind) + ": body_free needs 10 numbers a moving body (mass, inertia 3 x 3)");
+    for (int b = 0; b < m.n_moving; ++b) {
+      BodyMotion& mo = m.motion[b];
+      if (mo.kind != kBodyFree) continue;
+      mo.mass = bf[10 * b];
+      for (int k = 0; k < 9; ++k) mo.inertia[k] = bf[10 * b + 1 + k];
+      if (!(mo.mass > 0.0) || !(mo.inertia[0] > 0.0) || !(mo.inertia[4] > 0.0) || !(mo.inertia[8] > 0.0))
+        throw Error(std::string(kind) + ": free body " + std::to_string(b) + " needs a positive mass and inertia");
+    }
+    auto bc = p.numbers("body_contact");
+    if (bc.size() != 3 || !(bc[0] >= 0.0) || !(bc[1] >= 0.0) || !(bc[2] >= 0.0))
+      throw Error(std::string(kind) + ": body_contact needs 3 numbers >= 0 (r0, k, c)");
+    m.contact_r0 = float(bc[0]);
+    m.contact_k = float(bc[1]);
+    m.contact_c = float(bc[2]);
   }
   auto probes = p.numbers("probes");
   if (probes.size() % D != 0) throw Error(std::string(kind) + ": probes need " + std::to_string(D) + " numbers each");

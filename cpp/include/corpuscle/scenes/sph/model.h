@@ -97,6 +97,10 @@ struct Model {
   // follow its pose (the motion tables in the pipeline's buffer)
   int n_moving;
   BodyMotion motion[kMaxMovingBodies];
+  // free bodies among them (kBodyFree) and the tank's contact on their particles
+  // (bodies.h's tank_contact: the distance r0, the stiffness k and damping c per unit mass)
+  int n_free;
+  float contact_r0, contact_k, contact_c;
   int n_probes;
   float probes[kMaxProbes * D];
   // the kinematic viscosity the time step's diffusion limit needs (0 with artificial viscosity)
@@ -196,6 +200,10 @@ struct Scene {
   float series_p[kMaxProbes * kProbeSeries];
   // the moving bodies' poses at clock.time (bodies.h: c, R, v_c, w each)
   float body_pose[kMaxMovingBodies * kBodyPoseFloats];
+  // the free bodies' states (bodies.h: c, q, v_c, w; checkpointed) and the force and torque
+  // (about the centre of mass) of the fluid and the tank's contact in the last step's state
+  double free_state[kMaxMovingBodies * kFreeStateDoubles];
+  double body_force[kMaxMovingBodies * kBodyForceDoubles];
 };
 
 // what the pair loop reads of a neighbour j besides its position, packed for one vector load

@@ -137,7 +137,8 @@ class Pipeline {
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
     const double lists = kLists ? SlotNeighborList<D, Exec>::bytes(int(n), m.max_neighbors) : 0.0;
     const double bodies = m.n_moving > 0 ? double(m.n_wall) * (sizeof(int) + 3 * sizeof(float)) : 0.0;
-    return n * per + cells + lists + bodies + sizeof(ModelT);
+    const double free = m.n_free > 0 ? double(m.n_wall) * (sizeof(int) + sizeof(BodyItem)) : 0.0;
+    return n * per + cells + lists + bodies + free + sizeof(ModelT);
   }
 
   CPS_KIND_STORED_TABLES(CPS_SPH_FIELDS, CPS_SPH_WALL_FIELDS, CPS_SPH_SCALARS, CPS_SPH_CONTROLS, Scene, Control,
@@ -172,8 +173,10 @@ class Pipeline {
     ex_.to_device(fields_.id.cur(0), ids.data(), n_ * sizeof(int));
   }
 
-  static Scene initial_record(const ModelT&) {
+  static Scene initial_record(const ModelT& m) {
     Scene s{};
+    for (int b = 0; b < m.n_moving; ++b)  // the free bodies' state at t = 0 (bodies.h)
+      if (m.motion[b].kind == kBodyFree) free_body_start(m.motion[b], s.free_state + b * kFreeStateDoubles);
     s.clock = start_clock();
     s.sums = s.pending = StepSums::identity();
     s.rebuild = 1;
@@ -257,6 +260,31 @@ class Pipeline {
       if (m_.motion[k].kind == kBodyTable && (m_.motion[k].row0 < 0 || m_.motion[k].rows < 2 ||
                                               m_.motion[k].row0 + m_.motion[k].rows > rows))
         throw Error(std::string(kind) + ": moving body " + std::to_string(k) + "'s table rows lie outside the table");
+    // free bodies: each one's particles are a run of wall ids [w0, w0 + nw) (its force and
+    // torque are reduced over it), flagged for the pair stage
+    if (m_.n_free > 0) {
+      std::vector<int> flag(size_t(nw > 0 ? nw : 0), 0);
+      for (int bi = 0; bi < m_.n_moving; ++bi) {
+        BodyMotion& mo = m_.motion[bi];
+        if (mo.kind != kBodyFree) continue;
+        int first = -1, last = -1, count = 0;
+        for (int k = 0; k < nw; ++k)
+          if (b[k] == bi) {
+            if (first < 0) first = k;
+            last = k;
+            ++count;
+            flag[k] = 1;
+          }
+        if (count == 0 || last - first + 1 != count)
+          throw Error(std::string(kind) + ": free body " + std::to_string(bi) + "'s particles must be one run of wall ids");
+        mo.w0 = first;
+        mo.nw = count;
+      }
+      wall_free_.resize(size_t(nw));
+      ex_.to_device(wall_free_.data(), flag.data(), size_t(nw) * sizeof(int));
+      body_items_.resize(size_t(nw));
+      ex_.to_device(model_.data(), &m_, sizeof(ModelT));
+    }
     relist_ = true;
   }
   void advance(bool) { parity_ ^= 1; }
@@ -295,8 +323,8 @@ class Pipeline {
     ex_.mark(0);
     // 2. the pair sums through the index (the default model's terms fixed at compile time,
     //    DefaultTerms: no per-pair dispatch; any other model dispatches them per pair)
-    const InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_};
-    if (fixed_terms()) pair_pass(s, gv, InteractStage<D, DefaultTerms>{st.m, st.ctl, st.a, st.nf});
+    const InteractStage<D> st{PairConsts<D>::make(m_), u_, s, nf_, m_.n_free > 0 ? wall_free_.data() : nullptr};
+    if (fixed_terms()) pair_pass(s, gv, InteractStage<D, DefaultTerms>{st.m, st.ctl, st.a, st.nf, st.free_wall});
     else pair_pass(s, gv, st);
     ex_.mark(1);
     // 3. the probes of this state (the grid's walk; all pairs for that index)
@@ -306,6 +334,8 @@ class Pipeline {
       else  // (lists: the cells of the last build, of the list radius, hold every fluid particle within h)
         ex_.for_each(m_.n_probes, ProbeStage<D, CellGridView<D>>{md, g, s, kLists ? gv.with_radius(m_.h) : gv, nf_});
     }
+    // the free bodies' force and torque of this state (bodies.h)
+    if (m_.n_free > 0) body_forces(s);
     ex_.mark(2);
     if (integrate) {
       // 4. the reductions and the per-scene update
@@ -315,6 +345,8 @@ class Pipeline {
       ex_.mark(3);
       // 5. integrate in place (the sorted buffers become the current ones)
       ex_.for_each(n_, IntegrateStage<D>{md, g, s, nf_});
+      // the free bodies' step (their force and torque of this state, the step's dt)
+      if (m_.n_free > 0) ex_.single(FreeBodyStage<D>{md, g, u_});
       // the moving bodies' particles at the pose of the new time (bodies.h)
       if (m_.n_moving > 0) place_bodies(s);
       ex_.mark(4);
@@ -454,6 +486,18 @@ class Pipeline {
     }
   }
 
+  // the free bodies' force and torque: each particle's share (by its wall id), then one
+  // reduction a body over its run of wall ids into the record's body_force
+  void body_forces(const Arrays<D>& a) {
+    ex_.for_each(n_ - nf_, BodyForceStage<D>{model_.data(), g_, a, wall_body_.data(), body_items_.data(), nf_});
+    for (int b = 0; b < m_.n_moving; ++b) {
+      const BodyMotion& mo = m_.motion[b];
+      if (mo.kind != kBodyFree) continue;
+      ex_.reduce(body_items_.data() + mo.w0, mo.nw, reinterpret_cast<BodyItem*>(g_->body_force + b * kBodyForceDoubles),
+                 BodyItemOp{}, BodyItem::identity());
+    }
+  }
+
   // the moving bodies' poses at the record's time and their particles at them (arrays a)
   void place_bodies(const Arrays<D>& a) {
     ex_.single(BodyPoseStage<D>{model_.data(), g_, table_.size() ? table_.data() : nullptr});
@@ -487,6 +531,8 @@ class Pipeline {
   Buf<float> table_;      // the moving bodies' motion tables
   Buf<int> wall_body_;    // per wall particle (its slot at the build): its moving body or -1
   Buf<float> wall_local_; // per wall particle: its offset in its body's frame
+  Buf<int> wall_free_;    // per wall particle: 1 for a free body's (the pair stage's flag)
+  Buf<BodyItem> body_items_;  // per wall particle: its share of its free body's force and torque
   Buf<int> tags_;
   int nf_ = 0, n_ = 0;
   int parity_ = 0;

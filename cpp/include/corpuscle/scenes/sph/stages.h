@@ -106,6 +106,10 @@ struct InteractStage {
   const Control* ctl;
   Arrays<D> a;
   int nf;
+  // per wall particle (its id less nf): 1 for a free body's particle, which sums the fluid's
+  // pressure and viscous terms as a fluid particle would (its acceleration: the fluid's force on
+  // it over its mass, bodies.h); null without free bodies
+  const int* free_wall = nullptr;
 
   // the sums of particle i, and what the pair loop reads of i (loaded once, in begin)
   struct Acc {
@@ -116,6 +120,7 @@ struct InteractStage {
     Vec<D> vel_i;
     float rho_i, pr2_i;
     Vec<D> gradc;  // sum_j V_j grad W_ij (particle shifting only)
+    bool free_i;   // i is a free body's particle
   };
 
   CPS_HD Acc begin(int i) const {
@@ -128,6 +133,7 @@ struct InteractStage {
     s.rho_i = a.density[i];
     s.pr2_i = a.rec[i].pv.pr2;
     s.gradc = Vec<D>::zero();
+    s.free_i = i >= nf && free_wall != nullptr && free_wall[a.id[i] - nf] != 0;
     return s;
   }
 
@@ -152,7 +158,7 @@ struct InteractStage {
       dvc[k] = (fi || m.moving_bodies ? s.vel_i[k] : 0.0f) - (fj || m.moving_bodies ? pv.v[k] : 0.0f);
     }
     s.drho += m.mass * dot(dvc, gw);
-    if (!fi) return;
+    if (!fi && !s.free_i) return;  // (a free body's particle: j is fluid, the walls gather the fluid only)
     s.nbrs += 1;
     // rho_j and V_j = m / rho_j: in 3-D rho_j rides in the padding of j's position (a line the
     // lists' walk has just loaded: one neighbour load fewer) and V_j is computed here with the
@@ -177,7 +183,7 @@ struct InteractStage {
     const float vr = dot(dv, d);
     const float mu = sph_mu_inv(m.hs, vr, inv_den);
     s.mu_max = fmax2(s.mu_max, mu < 0.0f ? -mu : mu);
-    if (fj) {
+    if (fi && fj) {
       if constexpr (Terms::kFixed)
         s.drho += density_diffusion_rate_k<D, DensityDiffusionKind::Fourtakas>(m.dd, d, inv_den, rho_i, rho_j, vol_j, gw);
       else
@@ -218,8 +224,8 @@ struct InteractStage {
       it.nbrs = s.nbrs;
       if (!finite(it.amax2 + s.drho)) it.bad = 1;
     } else {
-      a.acceleration[i] = Vec<D>::zero();
-      if (!finite(s.drho)) it.bad = 1;
+      a.acceleration[i] = s.free_i ? s.acc : Vec<D>::zero();  // (a free body's: the fluid's alone)
+      if (!finite(s.drho + (s.free_i ? norm2(s.acc) : 0.0f))) it.bad = 1;
     }
     a.density_rate[i] = s.drho;
     a.items[i] = it;
@@ -372,7 +378,8 @@ struct BodyPoseStage {
     const Model<D>& m = *model;
     for (int b = 0; b < m.n_moving; ++b) {
       double p[kBodyPoseFloats];
-      body_pose(m.motion[b], table, g->clock.time, p);
+      if (m.motion[b].kind == kBodyFree) free_body_pose(g->free_state + b * kFreeStateDoubles, p);
+      else body_pose(m.motion[b], table, g->clock.time, p);
       for (int k = 0; k < kBodyPoseFloats; ++k) g->body_pose[b * kBodyPoseFloats + k] = float(p[k]);
     }
   }
@@ -404,6 +411,69 @@ struct BodyParticlesStage {
     const Model<D>& m = *model;
     if (a.x_build && norm2(m.per.displacement(x - a.x_build[i])) > m.rebuild_disp2 && g->rebuild == 0)
       atomic_max(&g->rebuild, 1);
+  }
+};
+
+// a free body's particles' shares of its force and torque (wall slots; `body` by the wall's id):
+// item w = (m a, (x - c) x m a), a the fluid's acceleration on the particle (the pair stage)
+// plus the tank's contact (tank_contact), c the body's centre of mass; reduced per body over its
+// wall ids [w0, w0 + nw) (the pipeline's body_forces: in the walls' build order, so the sums do
+// not depend on the sort)
+template <int D>
+struct BodyForceStage {
+  const Model<D>* model;
+  const Scene* g;
+  Arrays<D> a;
+  const int* body;
+  BodyItem* items;
+  int nf;
+  CPS_HD void operator()(int k) const {
+    const int i = nf + k;
+    const int w = a.id[i] - nf;
+    const int b = body[w];
+    const Model<D>& m = *model;
+    if (b < 0 || m.motion[b].kind != kBodyFree) return;
+    const Vec<D> x = a.position[i];
+    const Vec<D> acc =
+        a.acceleration[i] + tank_contact<D>(m.lo, m.hi, int(m.per.mask), m.contact_r0, m.contact_k, m.contact_c, x, a.velocity[i]);
+    const double* st = g->free_state + b * kFreeStateDoubles;
+    double f[3] = {0.0, 0.0, 0.0}, q[3] = {0.0, 0.0, 0.0};
+    for (int c = 0; c < D; ++c) {
+      f[c] = double(m.mass) * double(acc[c]);
+      q[c] = double(x[c]) - st[c];
+    }
+    BodyItem it;
+    for (int c = 0; c < 3; ++c) it.f[c] = f[c];
+    it.t[0] = q[1] * f[2] - q[2] * f[1];
+    it.t[1] = q[2] * f[0] - q[0] * f[2];
+    it.t[2] = q[0] * f[1] - q[1] * f[0];
+    items[w] = it;
+  }
+};
+
+// the free bodies' step (one item a scene; bodies.h's free_body_step with the step's dt), after
+// the fluid's integration: their force and torque of this step's state, gravity and the box's
+// control acceleration
+template <int D>
+struct FreeBodyStage {
+  const Model<D>* model;
+  Scene* g;
+  const Control* ctl;
+  CPS_HD void operator()(int) const {
+    const double dt = double(g->step_dt);
+    if (!(dt > 0.0)) return;
+    const Model<D>& m = *model;
+    double gv[3] = {0.0, 0.0, 0.0};
+    for (int k = 0; k < D; ++k) gv[k] = double(m.gravity[k]) + double(ctl->acc[k]);
+    for (int b = 0; b < m.n_moving; ++b) {
+      if (m.motion[b].kind != kBodyFree) continue;
+      double* st = g->free_state + b * kFreeStateDoubles;
+      const double* F = g->body_force + b * kBodyForceDoubles;
+      free_body_step(m.motion[b], st, F, F + 3, gv, dt, m.integrator == kSymplecticEuler, D);
+      double sum = 0.0;
+      for (int k = 0; k < kFreeStateDoubles; ++k) sum += st[k];
+      if (!(sum - sum == 0.0)) raise_first(&g->clock.bad, kBadParticles);
+    }
   }
 };
 

@@ -50,7 +50,9 @@
   X(probe_series_count, long long, kMaxProbes, series_n, false) \
   X(probe_series_time, double, kMaxProbes * kProbeSeries, series_t, false) \
   X(probe_series_pressure, float, kMaxProbes * kProbeSeries, series_p, false) \
-  X(body_pose, float, kMaxMovingBodies * kBodyPoseFloats, body_pose, false)
+  X(body_pose, float, kMaxMovingBodies * kBodyPoseFloats, body_pose, false) \
+  X(free_state, double, kMaxMovingBodies * kFreeStateDoubles, free_state, true) \
+  X(body_force, double, kMaxMovingBodies * kBodyForceDoubles, body_force, false)
 
 // X(name, C type, count, member of Control)
 #define CPS_SPH_CONTROLS(X) X(acceleration, float, 3, acc)
