@@ -28,7 +28,7 @@ def box2(backend="serial", neighbors="grid", periodic=("x", "y"), res=12, **over
           "fluid.hi": [1.0, 1.0], "fluid.spacing": 1.0 / res, "fluid.gravity": 0.0, "fluid.sound_speed": 10.0,
           "sph.viscosity": "laminar", "sph.nu": 0.01, "sph.diffusion": "none", "run.end_time": 10.0,
           "flow.initial": "rest", "sph.smoothing": 1.5, "walls.moving": [], "walls.velocity": [0.0, 0.0], "fluid.body_force": [0.0, 0.0],
-          "sph.transport_velocity": False}
+          "sph.transport_velocity": False, "timestep.dt_max": 1e-3}
     ov.update({k.replace("__", "."): v for k, v in over.items()})
     return Simulation(load_scene("taylor-green").with_overrides(ov), backend, neighbors=neighbors)
 

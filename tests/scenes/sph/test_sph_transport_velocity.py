@@ -20,6 +20,8 @@ from test_sph_canonical import INDEXES, CPU, box2, check_against_reference, refe
 
 
 def tvf_box(backend="serial", neighbors="grid", **over):
+    """box2 with the transport velocity at its default background pressure (rho0 c0^2)."""
+    over.setdefault("sph__transport_pressure", 0.0)
     return box2(backend, neighbors, sph__transport_velocity=True, **over)
 
 
