@@ -100,6 +100,19 @@ def test_tvf_pair_stage_matches_reference(backend, neighbors):
     np.testing.assert_allclose(step, want_step, rtol=0, atol=1e-6)
 
 
+def test_tvf_lanes_merge_the_push():
+    # lists with 4 lanes a particle (their partial sums merged): the same sums as one lane, to
+    # float reordering, the push (stored as v~ - v after a step) included
+    sims = [stir(tvf_box("cpu", "lists", sph__lanes=g)) for g in (1, 4)]
+    for s in sims:
+        set_transport(s)
+        s.step(1)
+    for f in ("acceleration", "transport"):
+        one, four = (np.asarray(s.core.download(f), dtype=np.float64) for s in sims)
+        assert np.abs(one).max() > 0
+        np.testing.assert_allclose(four, one, rtol=0, atol=1e-5 * np.abs(one).max())
+
+
 def test_tvf_off_is_the_plain_model():
     # the switch off: the pair stage is the reference's without any of it (the default scene
     # values of test_sph_canonical)
