@@ -175,6 +175,41 @@ nb::ndarray<nb::numpy, float> laminar_viscosity(SphKernelKind kind, float h, flo
   return vec_out<D>(acc);
 }
 
+// the transport-velocity terms (Adami et al. 2013): per particle, the extra stress's
+// acceleration (D columns) then the background pressure's push (D columns), V = m / rho
+template <int D>
+nb::ndarray<nb::numpy, float> tvf_terms(SphKernelKind kind, float h, float p_b, const FArray& x, const FArray& v,
+                                        const FArray& dvt, const FArray& rho, const FArray& m) {
+  size_t n = rows(x, D, "x");
+  rows(v, D, "v");
+  if (rows(dvt, D, "dvt") != n) throw nb::value_error("dvt: one row per particle");
+  check_len(rho, n, "rho");
+  check_len(m, n, "m");
+  auto k = SphKernel<D>::make(kind, h);
+  const float *R = rho.data(), *M = m.data();
+  std::vector<float> out(n * 2 * D, 0.0f);
+  for (size_t i = 0; i < n; ++i) {
+    Vec<D> xi = row<D>(x, i), vi = row<D>(v, i), ti = row<D>(dvt, i);
+    Vec<D> a = Vec<D>::zero(), b = Vec<D>::zero();
+    const float vol_i = M[i] / R[i];
+    for (size_t j = 0; j < n; ++j) {
+      if (j == i) continue;
+      Vec<D> d = xi - row<D>(x, j);
+      float r2 = norm2(d);
+      if (r2 >= k.k.h2) continue;
+      Vec<D> g = k.grad(d, fsqrt(r2));
+      const float vol_j = M[j] / R[j];
+      a += tvf_stress_acc<D>(R[i], vi, ti, R[j], row<D>(v, j), row<D>(dvt, j), vol_i, vol_j, M[i], g);
+      b += tvf_background_acc<D>(p_b, vol_i, vol_j, M[i], g);
+    }
+    for (int c = 0; c < D; ++c) {
+      out[i * 2 * D + c] = a[c];
+      out[i * 2 * D + D + c] = b[c];
+    }
+  }
+  return out_array(std::move(out), n, 2 * D);
+}
+
 DensityDiffusion diffusion(const std::string& kind, float delta, float hs, float c0, float rho0, float gamma,
                            float g) {
   if (kind == "none") return DensityDiffusion::none();
@@ -277,6 +312,17 @@ void bind_sph(nb::module_& m) {
       },
       nb::arg("kernel"), nb::arg("dim"), nb::arg("h"), nb::arg("nu0"), nb::arg("hs"), nb::arg("x"), nb::arg("v"),
       nb::arg("rho"), nb::arg("mass"), "Per-particle laminar-viscosity acceleration over all pairs within h.");
+  m.def(
+      "sph_tvf_terms",
+      [](const std::string& kernel, int dim, float h, float p_b, const FArray& x, const FArray& v, const FArray& dvt,
+         const FArray& rho, const FArray& mass) {
+        auto kind = kernel_kind(kernel);
+        return by_dim(dim, [&](auto D) { return tvf_terms<decltype(D)::value>(kind, h, p_b, x, v, dvt, rho, mass); });
+      },
+      nb::arg("kernel"), nb::arg("dim"), nb::arg("h"), nb::arg("p_b"), nb::arg("x"), nb::arg("v"), nb::arg("dvt"),
+      nb::arg("rho"), nb::arg("mass"),
+      "Per particle over all pairs within h: the transport-velocity extra stress's acceleration (dim columns), "
+      "then the background pressure's push (dim columns); dvt = v~ - v.");
   m.def(
       "sph_density_diffusion",
       [](const std::string& kernel, int dim, float h, const std::string& kind, float delta, float hs, float c0,

@@ -413,3 +413,79 @@ def test_cfl_mu_max_from_pairs(dim):
     assert np.abs(mu).max() == pytest.approx(np.abs(ref).max(), rel=1e-5)
     dt = testing.sph_choose_dt_cfl(0.2, HS, 0.0, 20.0, float(np.abs(mu).max()), 1e-9, 1.0)
     assert dt == pytest.approx(0.2 * HS / (20.0 + np.abs(ref).max()), rel=1e-5)
+
+
+# ---- the transport-velocity formulation (Adami, Hu & Adams 2013) ----
+
+
+def tvf_ref(dim, h, p_b, x, v, dvt, rho, m):
+    """float64: the extra stress's acceleration (1/m_i) sum_j (V_i^2 + V_j^2) 1/2 (A_i + A_j) . grad W,
+    A = rho v (v~ - v)^T, and the background push -(p_b / m_i) sum_j (V_i^2 + V_j^2) grad W."""
+    d, _, _, mask = pairs(x, v, h)
+    g = np.where(mask[..., None], wendland_grad(dim, h, d), 0.0)
+    vol = m / rho
+    s = (vol[:, None] ** 2 + vol[None, :] ** 2) / m[:, None]
+    ai = rho[:, None, None] * v[:, None, :] * np.sum(dvt[:, None, :] * g, axis=-1)[..., None]
+    aj = rho[None, :, None] * v[None, :, :] * np.sum(dvt[None, :, :] * g, axis=-1)[..., None]
+    stress = np.sum(0.5 * s[..., None] * (ai + aj), axis=1)
+    push = -p_b * np.sum(s[..., None] * g, axis=1)
+    return stress, push
+
+
+def tvf(dim, x, v, dvt, rho, m, p_b):
+    out = np.asarray(testing.sph_tvf_terms("wendland_c2", dim, H, p_b, f32(x), f32(v), f32(dvt), f32(rho), f32(m)),
+                     np.float64)
+    return out[:, :dim], out[:, dim:]
+
+
+@pytest.mark.parametrize("dim", DIMS)
+def test_tvf_terms_match_reference_and_conserve_momentum(dim):
+    # both terms against float64 per particle (rtol 1e-4, floor 1e-5 of the largest: float32 sums
+    # with cancellation), and m_i a_ij = -m_j a_ji pair by pair: the sums of m a over the block
+    # vanish to float32 rounding (1e-6 of sum |m a|); unequal masses and densities
+    x, v, rho, c, m = particle_block(dim, 7 if dim == 2 else 4, DP, seed=60 + dim)
+    rng = np.random.default_rng(70 + dim)
+    dvt = np.asarray(rng.normal(scale=0.05, size=v.shape), F32).astype(np.float64)
+    p_b = 1000.0 * 20.0**2
+    stress, push = tvf(dim, x, v, dvt, rho, m, p_b)
+    rs, rp = tvf_ref(dim, H, p_b, x, v, dvt, rho, m)
+    np.testing.assert_allclose(stress, rs, rtol=1e-4, atol=1e-5 * np.abs(rs).max())
+    np.testing.assert_allclose(push, rp, rtol=1e-4, atol=1e-5 * np.abs(rp).max())
+    for a in (stress, push):
+        f = m[:, None] * a
+        assert np.abs(f).sum() > 0
+        assert np.all(np.abs(f.sum(axis=0)) < 1e-6 * np.abs(f).sum())
+    # no transport difference, no extra stress
+    s0, _ = tvf(dim, x, v, np.zeros_like(dvt), rho, m, p_b)
+    assert np.all(s0 == 0.0)
+
+
+@pytest.mark.parametrize("dim", DIMS)
+def test_tvf_push_restores_a_uniform_lattice(dim):
+    # on a uniform lattice the push of every particle a support away from the block's edge
+    # vanishes (sum_j grad W = 0 by symmetry, to float32 rounding); a particle moved off its
+    # site is pushed back towards it, along the displacement (the restoring force that keeps
+    # the particles evenly spread)
+    n_side = 9 if dim == 2 else 7
+    x, v, rho, c, m = particle_block(dim, n_side, DP, seed=80, jitter=0.0)
+    rho[:] = 1000.0
+    m[:] = 1000.0 * DP**dim
+    p_b = 1000.0 * 20.0**2
+    centre = np.all(np.abs(x - x.mean(0)) < 1e-9 + 0.5 * DP, axis=1)
+    k = int(np.flatnonzero(centre)[0])
+    _, push = tvf(dim, x, v, np.zeros_like(v), rho, m, p_b)
+    inner = np.all((x >= x.min(0) + H) & (x <= x.max(0) - H), axis=1)
+    assert inner.sum() >= 1 and inner[k]
+    # the size of the terms that cancel: sum_j (p_b / m) (V_i^2 + V_j^2) |grad W|; float32 rounding
+    # of their sum is ~1e-7 of it per term
+    d, _, _, mask = pairs(x, v, H)
+    g = np.where(mask[..., None], wendland_grad(dim, H, d), 0.0)
+    scale = (p_b * 2.0 * (m / rho)[:, None] ** 2 / m[:, None] * np.linalg.norm(g, axis=-1)).sum(1)
+    assert np.all(np.abs(push[inner]).max(1) < 1e-6 * scale[inner])
+    shift = np.zeros(dim)
+    shift[0], shift[-1] = 0.15 * DP, -0.1 * DP
+    x2 = x.copy()
+    x2[k] += shift
+    _, push2 = tvf(dim, x2, v, np.zeros_like(v), rho, m, p_b)
+    cos = np.dot(push2[k], shift) / (np.linalg.norm(push2[k]) * np.linalg.norm(shift))
+    assert cos < -0.999 and np.linalg.norm(push2[k]) > 0.01 * scale[k]

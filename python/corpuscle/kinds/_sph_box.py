@@ -115,6 +115,13 @@ def boundary_keys(dim: int) -> dict[str, KeySpec]:
         "sph.shifting": _K("float", 0.0, "", 0.0, 100.0, "particle shifting A (Skillen et al. 2013: each step a "
                            "particle moves by -A hs |v| dt grad C, keeping the particles evenly spread in a "
                            "stretching flow; 2 is DualSPHysics's); 0: off. For flows with no free surface"),
+        "sph.transport_velocity": _K("bool", False, "", doc="the transport-velocity formulation (Adami, Hu & "
+                                     "Adams 2013): the particles move with the momentum velocity plus the push of a "
+                                     "background pressure (sph.transport_pressure) over the step, which keeps them "
+                                     "evenly spread where the flow stretches them, and the momentum equation gains "
+                                     "the extra stress rho v (v~ - v). For flows with no free surface"),
+        "sph.transport_pressure": _K("float", 0.0, "Pa", 0.0, 1e12, "the transport velocity's background pressure "
+                                     "p_b; 0: rho0 c0^2 (the paper's reference pressure)"),
         "flow.initial": _K("enum", "rest", "", doc="the fluid's initial velocity: rest, or taylor-green (2-D, "
                            "periodic in x and y: u = U sin(2 pi x / Lx) cos(2 pi y / Ly), v = -U cos sin, with its "
                            "pressure)", choices=("rest", "taylor-green")),
@@ -162,6 +169,11 @@ def _check_boundaries(dim: int) -> CrossCheck:
                                  f"along its normal: only walls sliding in their own plane are supported")
         if len(set(_face(f, dim) for f in moving)) != len(moving):
             raise SceneError(f"walls.moving = {_fmt_value(moving)} names a face twice")
+        if values["sph.transport_velocity"]:
+            for key, off in (("sph.shifting", 0.0), ("fluid.background_pressure", 0.0)):
+                if values[key] != off:
+                    raise SceneError(f"{key} = {_fmt_value(values[key])} with sph.transport_velocity = true: the "
+                                     f"transport velocity keeps the particles spread itself (use one or the other)")
         if values["flow.initial"] == "taylor-green" and (dim != 2 or set(per) != {"x", "y"}):
             raise SceneError(f"flow.initial = 'taylor-green' needs a 2-D kind periodic in x and y "
                              f"(boundary.periodic = [\"x\", \"y\"]), got boundary.periodic = {_fmt_value(per)}")
@@ -283,6 +295,8 @@ class SphBox(Kind):
             **probe_face_params(scene.arrays, D, dp),
             "periodic": int(sum(1 << k for k in range(D) if periodic[k])),
             "background_pressure": float(v["fluid.background_pressure"]), "shifting": float(v["sph.shifting"]),
+            "transport_velocity": int(bool(v["sph.transport_velocity"])),
+            "transport_pressure": float(v["sph.transport_pressure"]) or rho0 * c0 * c0,
         }
         # --neighbors lists: slot lists within h (1 + skin), rebuilt once a particle has moved
         # skin h / 2; capacity 1.3 times the count within that reach at the lattice spacing

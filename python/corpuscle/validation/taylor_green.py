@@ -2,7 +2,8 @@
 
 A periodic square of side L = 1 m (periodic in x and y, no walls), u = U sin(kx) cos(ky),
 v = -U cos(kx) sin(ky), k = 2 pi / L, U = 1 m/s, nu = 0.01 m^2/s, with the laminar viscosity
-(Lo & Shao 2002, Morris et al. 1997's form) and c0 = 10 U. The amplitude U(t) is the least-
+(Lo & Shao 2002, Morris et al. 1997's form), c0 = 10 U and the scene's transport-velocity
+formulation (Adami, Hu & Adams 2013: p_b = 2 rho0 c0^2; docs/sph_box.md). The amplitude U(t) is the least-
 squares projection of the particles' velocities on the mode at their current positions; the
 Navier-Stokes solution decays as U(t) = U exp(-8 pi^2 nu t / L^2) (2 k^2 nu t).
 

@@ -202,4 +202,31 @@ CPS_HD CPS_INLINE float density_diffusion_rate(const DensityDiffusion& p, const 
   return density_diffusion_rate_v<D>(p, d, sph_inv_den(r2, p.eta2), rho_i, rho_j, m_j / rho_j, gradW);
 }
 
+// ---- the transport-velocity formulation (Adami, Hu & Adams 2013, J. Comput. Phys. 241) ----
+// The particles move with a transport velocity v~ = v + dv~ that differs from the momentum
+// velocity v by the push of a constant background pressure p_b, which drives them towards a
+// uniform spacing (no clumping, no gaps where the flow stretches the lattice) without acting
+// on the momentum:
+//   a~_i = -(p_b / m_i) sum_j (V_i^2 + V_j^2) grad_i W_ij             (the background push)
+// integrated over a step into the advection (v~ - v = dt / 2 a~ of the kick-drift scheme), and
+// the momentum equation gains the divergence of the extra stress A = rho v (v~ - v)^T that
+// the difference carries,
+//   a_i += (1 / m_i) sum_j (V_i^2 + V_j^2) 1/2 (A_i + A_j) . grad_i W_ij,
+//   (A . g)_k = rho v_k ((v~ - v) . g)
+// (the paper's eqs. 8 and 13-15), V = m / rho. Both are m_i a_ij = -m_j a_ji (their factors are
+// symmetric in (i, j), grad W antisymmetric): momentum and the sum of the pushes are conserved.
+// With m_i the particle's mass; for a uniform lattice sum_j grad W = 0 and the push vanishes.
+template <int D>
+CPS_HD CPS_INLINE Vec<D> tvf_background_acc(float p_b, float vol_i, float vol_j, float m_i, const Vec<D>& gradW) {
+  return gradW * (-fdiv_fast(p_b * (vol_i * vol_i + vol_j * vol_j), m_i));
+}
+// dvt_i = v~_i - v_i (the last step's push), v_i the momentum velocity
+template <int D>
+CPS_HD CPS_INLINE Vec<D> tvf_stress_acc(float rho_i, const Vec<D>& v_i, const Vec<D>& dvt_i, float rho_j,
+                                        const Vec<D>& v_j, const Vec<D>& dvt_j, float vol_i, float vol_j, float m_i,
+                                        const Vec<D>& gradW) {
+  const float s = 0.5f * fdiv_fast(vol_i * vol_i + vol_j * vol_j, m_i);
+  return (v_i * (rho_i * dot(dvt_i, gradW)) + v_j * (rho_j * dot(dvt_j, gradW))) * s;
+}
+
 }  // namespace cps

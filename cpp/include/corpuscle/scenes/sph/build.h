@@ -95,6 +95,10 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   m.p_back = p.has("background_pressure") ? p.f("background_pressure") : 0.0f;
   if (!(m.p_back >= 0.0f) || !finite(m.p_back))
     throw Error(std::string(kind) + ": background_pressure must be finite and >= 0, got " + std::to_string(m.p_back));
+  m.tvf = p.has("transport_velocity") ? int(p.integer("transport_velocity")) : 0;
+  m.tvf_pb = p.has("transport_pressure") ? p.f("transport_pressure") : 0.0f;
+  if ((m.tvf != 0 && m.tvf != 1) || !(m.tvf_pb >= 0.0f) || !finite(m.tvf_pb))
+    throw Error(std::string(kind) + ": transport_velocity must be 0 or 1 and transport_pressure finite and >= 0");
   m.viscosity = int(p.integer("viscosity"));
   if (m.viscosity != kArtificialViscosity && m.viscosity != kLaminarViscosity)
     throw Error(std::string(kind) + ": viscosity must be 0 (artificial) or 1 (laminar)");

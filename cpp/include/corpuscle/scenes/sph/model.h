@@ -78,6 +78,14 @@ struct Model {
   // spread where the flow stretches them (a vortex), with no free surface in the box. For the
   // canonical flows (periodic, closed boxes); the free-surface correction is not made.
   float shift_a;
+  // the transport-velocity formulation (`sph.transport_velocity`; off by default; Adami, Hu &
+  // Adams 2013, physics/sph_pair_terms.h): the fluid moves with v + dv~, dv~ = dt / 2 of the
+  // push of the background pressure tvf_pb (Pa) over the step, stored per particle (the
+  // pipeline's transport buffers, allocated only when on), and the momentum equation gains the
+  // extra stress rho v dv~; the continuity equation sees the transport velocity. For flows with
+  // no free surface (the push pulls a free surface apart)
+  int tvf;
+  float tvf_pb;
   // the `lists` index: slot lists within list_radius = h (1 + skin), built on the steps that
   // sort and reused until a particle has moved more than skin h / 2 since (rebuild_disp2 is
   // that distance squared); max_neighbors entries per slot (grown on overflow). Other

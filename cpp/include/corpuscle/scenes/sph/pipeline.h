@@ -138,7 +138,8 @@ class Pipeline {
     const double lists = kLists ? SlotNeighborList<D, Exec>::bytes(int(n), m.max_neighbors) : 0.0;
     const double bodies = m.n_moving > 0 ? double(m.n_wall) * (sizeof(int) + 3 * sizeof(float)) : 0.0;
     const double free = m.n_free > 0 ? double(m.n_wall) * (sizeof(int) + sizeof(BodyItem)) : 0.0;
-    return n * per + cells + lists + bodies + free + sizeof(ModelT);
+    const double tvf = m.tvf ? n * 3.0 * sizeof(Vec<D>) : 0.0;  // (transport_, transport_acc_)
+    return n * per + cells + lists + bodies + free + tvf + sizeof(ModelT);
   }
 
   CPS_KIND_STORED_TABLES(CPS_SPH_FIELDS, CPS_SPH_WALL_FIELDS, CPS_SPH_SCALARS, CPS_SPH_CONTROLS, Scene, Control,
@@ -171,6 +172,11 @@ class Pipeline {
     std::vector<int> ids(n_);
     for (int i = 0; i < n_; ++i) ids[i] = i;
     ex_.to_device(fields_.id.cur(0), ids.data(), n_ * sizeof(int));
+    if (m_.tvf) {  // the transport velocity's buffers: v~ - v (zero at the start) and the push
+      for (auto& b : transport_) b.resize(n_);
+      transport_acc_.resize(n_);
+      reset_transport();
+    }
   }
 
   static Scene initial_record(const ModelT& m) {
@@ -375,11 +381,17 @@ class Pipeline {
     const int nf = nf_, nw = n_ - nf_;
     const bool wall = name.rfind("wall_", 0) == 0;
     const long long want = wall ? nw : nf;
-    if (count != want) throw Error(std::string(kind) + ": " + name + " needs " + std::to_string(want) + " items");
     const int cur = parity_;
     const size_t off = wall ? size_t(nf) : 0;
+    if (name == "transport") {  // (a checkpoint's; the fluid's slots, none when the formulation is off)
+      if (count != transport_count()) throw Error(std::string(kind) + ": transport needs " + std::to_string(transport_count()) + " items");
+      if (count > 0) ex_.to_device(transport_view(cur), src, count * sizeof(Vec<D>));
+      return;
+    }
+    if (count != want) throw Error(std::string(kind) + ": " + name + " needs " + std::to_string(want) + " items");
     if (name == "position" || name == "wall_position") {
       ex_.to_device(fields_.position.cur(cur) + off, src, count * sizeof(Vec<D>));
+      if (!wall && m_.tvf) reset_transport();  // a new state starts with v~ = v
       std::vector<int> ids(count);
       for (long long i = 0; i < count; ++i) ids[i] = int(off + i);
       ex_.to_device(fields_.id.cur(cur) + off, ids.data(), count * sizeof(int));
@@ -504,10 +516,21 @@ class Pipeline {
     if (n_ > nf_) ex_.for_each(n_ - nf_, BodyParticlesStage<D>{model_.data(), g_, a, wall_body_.data(), wall_local_.data(), nf_});
   }
 
+  // the transport velocity's v~ - v (the fluid's slots of the current buffer; none when off)
+  Vec<D>* transport_view(int cur) { return m_.tvf ? transport_[cur].data() : nullptr; }
+  long long transport_count() const { return m_.tvf ? nf_ : 0; }
+  void reset_transport() {
+    std::vector<Vec<D>> zero(size_t(n_), Vec<D>::zero());
+    for (auto& b : transport_) ex_.to_device(b.data(), zero.data(), size_t(n_) * sizeof(Vec<D>));
+  }
+
   Arrays<D> arrays(int cur, int nxt) {
     Arrays<D> a;
     fields_.fill(a, cur);  // (the other buffers: nxt = cur ^ 1)
     (void)nxt;
+    a.transport = m_.tvf ? transport_[cur].data() : nullptr;
+    a.transport_alt = m_.tvf ? transport_[cur ^ 1].data() : nullptr;
+    a.transport_acc = m_.tvf ? transport_acc_.data() : nullptr;
     a.rec = rec_.data();
     a.pr = D == 2 ? pr_.data() : nullptr;
     a.x_build = kLists ? x_build_.data() : nullptr;
@@ -525,6 +548,8 @@ class Pipeline {
   Buf<PairRecord<D>> rec_;
   Buf<PairRho> pr_;
   Buf<Vec<D>> x_build_;
+  Buf<Vec<D>> transport_[2];   // the transport velocity's v~ - v (current and other, by parity)
+  Buf<Vec<D>> transport_acc_;  // its step's background push
   SlotNeighborList<D, Exec> lists_;
   bool relist_ = false;
   Buf<StepSums> items_;

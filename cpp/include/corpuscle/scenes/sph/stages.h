@@ -34,6 +34,7 @@ struct ReorderStage {
     const Vec<D> x = a.position[o];
     const float rho = a.density[o];
     a.gather(j, o);  // every field that moves with the particle (tables.h)
+    if (a.transport) a.transport_alt[j] = a.transport[o];  // (the transport velocity's, when on)
     const float p = tait_pressure(*model, rho);
     a.pressure[j] = p;
     const Vec<D> v = a.velocity[o];
@@ -75,13 +76,15 @@ struct PairConsts {
   Vec<D> gravity;
   int shifting;  // grad C accumulated (particle shifting on)
   int moving_bodies;  // the walls' velocity enters the continuity equation (scenes with moving bodies)
+  int tvf;       // the transport-velocity formulation (RuntimeTerms only)
+  float tvf_pb;  // its background pressure
   static PairConsts make(const Model<D>& m) {
     // the terms were made from the same hs with the same expression (0.01f * hs * hs)
     if (m.av.eta2 != m.lv.eta2 || (m.dd.kind != DensityDiffusionKind::None && m.dd.eta2 != m.av.eta2) ||
         m.av.hs != m.hs)
       throw Error("sph: the pair terms' eta^2 or hs differ");
     return PairConsts{m.kernels.gradient, m.mass, m.hs, m.c0, m.av.eta2, m.viscosity, m.av, m.lv, m.dd, m.gravity,
-                      m.shift_a > 0.0f ? 1 : 0, m.n_moving > 0 ? 1 : 0};
+                      m.shift_a > 0.0f ? 1 : 0, m.n_moving > 0 ? 1 : 0, m.tvf, m.tvf_pb};
   }
 };
 
@@ -96,9 +99,19 @@ struct DefaultTerms {
   template <int D>
   static bool matches(const Model<D>& m) {
     return m.kernels.gradient.kind == SphKernelKind::WendlandC2 && m.viscosity == kArtificialViscosity &&
-           m.dd.kind == DensityDiffusionKind::Fourtakas && !(m.shift_a > 0.0f);
+           m.dd.kind == DensityDiffusionKind::Fourtakas && !(m.shift_a > 0.0f) && !m.tvf;
   }
 };
+
+// the pair sums the transport-velocity formulation adds (RuntimeTerms only: the fixed default
+// terms' sums are an empty base, so their record and its lanes' shuffles are as without it)
+template <int D, bool Fixed>
+struct TvfSums {
+  Vec<D> accb;   // the background pressure's push (sph_pair_terms.h, tvf_background_acc)
+  Vec<D> dvt_i;  // v~_i - v_i, loaded in begin
+};
+template <int D>
+struct TvfSums<D, true> {};
 
 template <int D, class Terms = RuntimeTerms>
 struct InteractStage {
@@ -112,7 +125,7 @@ struct InteractStage {
   const int* free_wall = nullptr;
 
   // the sums of particle i, and what the pair loop reads of i (loaded once, in begin)
-  struct Acc {
+  struct Acc : TvfSums<D, Terms::kFixed> {
     Vec<D> acc;
     float drho;
     float mu_max;
@@ -134,6 +147,10 @@ struct InteractStage {
     s.pr2_i = a.rec[i].pv.pr2;
     s.gradc = Vec<D>::zero();
     s.free_i = i >= nf && free_wall != nullptr && free_wall[a.id[i] - nf] != 0;
+    if constexpr (!Terms::kFixed) {
+      s.accb = Vec<D>::zero();
+      s.dvt_i = m.tvf && i < nf ? a.transport[i] : Vec<D>::zero();
+    }
     return s;
   }
 
@@ -156,6 +173,14 @@ struct InteractStage {
       // particles do move (bodies.h; such scenes have no sliding lids, and their walls at rest
       // carry zero)
       dvc[k] = (fi || m.moving_bodies ? s.vel_i[k] : 0.0f) - (fj || m.moving_bodies ? pv.v[k] : 0.0f);
+    }
+    // the transport-velocity formulation: the particles move with v~ = v + dv~ (the walls' dv~ is 0)
+    [[maybe_unused]] Vec<D> dvt_j;
+    if constexpr (!Terms::kFixed) {
+      if (m.tvf) {
+        dvt_j = fj ? a.transport[j] : Vec<D>::zero();
+        dvc += s.dvt_i - dvt_j;
+      }
     }
     s.drho += m.mass * dot(dvc, gw);
     if (!fi && !s.free_i) return;  // (a free body's particle: j is fluid, the walls gather the fluid only)
@@ -196,6 +221,15 @@ struct InteractStage {
       s.acc += artificial_viscosity_acc_mu<D>(m.av, vr, mu, m.c0, m.c0, rho_i, rho_j, m.mass, gw);
     else
       s.acc += laminar_viscosity_acc_den<D>(m.lv, d, dv, den, rho_i, rho_j, m.mass, gw);
+    if constexpr (!Terms::kFixed) {
+      if (m.tvf) {
+        const float vol_i = m.mass / rho_i;
+        Vec<D> v_j;
+        for (int k = 0; k < D; ++k) v_j[k] = pv.v[k];
+        s.acc += tvf_stress_acc<D>(rho_i, s.vel_i, s.dvt_i, rho_j, v_j, dvt_j, vol_i, vol_j, m.mass, gw);
+        s.accb += tvf_background_acc<D>(m.tvf_pb, vol_i, vol_j, m.mass, gw);
+      }
+    }
   }
 
   // b's pair sums added to a's (lanes sharing a particle's list: a holds the lower lane's)
@@ -205,6 +239,7 @@ struct InteractStage {
     a.mu_max = fmax2(a.mu_max, b.mu_max);
     a.nbrs += b.nbrs;
     a.gradc += b.gradc;
+    if constexpr (!Terms::kFixed) a.accb += b.accb;
   }
 
   CPS_HD void end(int i, Acc& s) const {
@@ -215,6 +250,8 @@ struct InteractStage {
       for (int k = 0; k < D; ++k) acc[k] += ctl->acc[k];
       a.acceleration[i] = acc;
       if (m.shifting) a.shift_grad[i] = s.gradc;
+      if constexpr (!Terms::kFixed)
+        if (m.tvf) a.transport_acc[i] = s.accb;
       const Vec<D> v = s.vel_i;
       it.amax2 = norm2(acc);
       it.vmax2 = norm2(v);
@@ -510,6 +547,11 @@ struct IntegrateStage {
     } else {
       v = euler ? v0 + acc * dt : a.velocity_prev[i] + acc * (2.0f * dt);
       x = a.position[i] + v0 * dt + acc * (0.5f * dt * dt);
+    }
+    if (m.tvf) {  // the transport velocity: the background push over the step (dv~ = dt / 2 a~)
+      const Vec<D> dvt = a.transport_acc[i] * (0.5f * dt);
+      x += dvt * dt;
+      a.transport[i] = dvt;
     }
     if (m.shift_a > 0.0f)  // particle shifting: -A hs |v| dt grad C
       x -= a.shift_grad[i] * (m.shift_a * m.hs * fsqrt(norm2(v0)) * dt);

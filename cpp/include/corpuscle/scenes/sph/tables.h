@@ -19,7 +19,9 @@
   X(density_rate, float, 1, "fluid", false, false, false, false)     \
   X(shift_grad, float, D, "fluid", false, false, false, false)
 
-// the wall particles' views of those buffers (slots [nf, nf + nw))
+// the wall particles' views of those buffers (slots [nf, nf + nw)), and the fluid's transport-
+// velocity difference v~ - v (`sph.transport_velocity`: buffers of its own, allocated only when
+// on; none otherwise)
 // X(name, C type, components, group, checkpointed, settable, storage, count)
 #define CPS_SPH_WALL_FIELDS(X)                                                                 \
   X(wall_position, float, D, "wall", true, true, fields_.position.cur(cur) + nf, nw)          \
@@ -27,7 +29,8 @@
   X(wall_density, float, 1, "wall", true, true, fields_.density.cur(cur) + nf, nw)            \
   X(wall_density_prev, float, 1, "wall", true, false, fields_.density_prev.cur(cur) + nf, nw) \
   X(wall_pressure, float, 1, "wall", false, false, fields_.pressure.cur(cur) + nf, nw)         \
-  X(wall_velocity, float, D, "wall", false, true, fields_.velocity.cur(cur) + nf, nw)
+  X(wall_velocity, float, D, "wall", false, true, fields_.velocity.cur(cur) + nf, nw)       \
+  X(transport, float, D, "transport", true, false, transport_view(cur), transport_count())
 
 // X(name, C type, count, member of Scene, checkpointed)
 #define CPS_SPH_SCALARS(X)                              \
@@ -69,6 +72,11 @@ struct Arrays {
                        // fourth float, the pair loop's rho_j), velocity and p / rho^2
   PairRho* pr;       // 2-D: the pair loop's rho and m / rho (the density diffusion's V_j)
   Vec<D>* x_build;   // `lists`: positions at the last build (sorted slots; null for other indexes)
+  // the transport-velocity formulation (null when off): v~ - v of every slot (the current and
+  // the other buffer, gathered by the reorder as a moving field) and the step's background push
+  Vec<D>* transport;
+  Vec<D>* transport_alt;
+  Vec<D>* transport_acc;
   StepSums* items;
 };
 
