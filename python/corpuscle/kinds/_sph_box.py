@@ -106,6 +106,11 @@ def boundary_keys(dim: int) -> dict[str, KeySpec]:
                            + "xyz"[dim - 1] + "-); their particles carry walls.velocity in the pair terms and stay "
                            "in place (a wall sliding in its own plane)"),
         "walls.velocity": _K(vec, [0.0] * dim, "m/s", -1e4, 1e4, "the moving walls' velocity (tangential to them)"),
+        "walls.layers": _K("int", 0, "dp", 0, 64, "lattice layers of wall (DBC) particles outside each face of the "
+                           "box and inside each body's surface; 0: as deep as the kernel support, ceil(2 hs / dp) "
+                           "(4 at hs = 1.732 dp); 1: DualSPHysics's drawing of a wall as one layer (about a quarter "
+                           "of the wall particles; the fluid then sees a truncated kernel at the wall: "
+                           "docs/sph_box.md)"),
         "fluid.body_force": _K(vec, [0.0] * dim, "m/s^2", -1e6, 1e6, "a body acceleration added to gravity (drives "
                                "a periodic channel: Poiseuille flow)"),
         "fluid.background_pressure": _K("float", 0.0, "Pa", 0.0, 1e9, "a constant added to the pressure in the "
@@ -237,7 +242,9 @@ class SphBox(Kind):
         smoothing = float(v["sph.smoothing"])
         hs = smoothing * dp
         h = 2.0 * hs
-        layers = int(math.ceil(h / dp - 1e-6))
+        support_layers = int(math.ceil(h / dp - 1e-6))
+        # walls.layers: the DBC walls' thickness in lattice layers (0: the kernel support's)
+        layers = int(v["walls.layers"]) or support_layers
         # periodic axes: no wall layers across them (the walls of the other axes span the period)
         periodic = np.array(["xyz"[k] in v["boundary.periodic"] for k in range(D)])
         wall_layers = np.where(periodic, 0, layers)
@@ -331,7 +338,7 @@ class SphBox(Kind):
             arrays["wall_velocity"] = np.ascontiguousarray(wall_vel, dtype=np.float32).reshape(-1, D)
         arrays.update(moving)
         info = {"spacing": dp, "h": h, "hs": hs, "mass": rho0 * dp ** D, "rho0": rho0, "c0": c0, "B": B,
-                "gamma": gamma, "gravity": g, "layers": layers, "box": box_hi.copy(), "fluid_height": height,
+                "gamma": gamma, "gravity": g, "layers": layers, "support_layers": support_layers, "box": box_hi.copy(), "fluid_height": height,
                 "fluid_lo": f0 * dp, "fluid_hi": f1 * dp, "n_fluid": nf_est, "n_wall": int(box_cells),
                 "probe_names": [str(p["name"]) for p in scene.arrays.get("probes", [])],
                 "probe_positions": np.asarray(probes, dtype=np.float64).reshape(-1, D),
