@@ -59,3 +59,31 @@ def memory_per_particle(sim) -> dict[str, Any]:
         # (this scene's buffers are allocated already: what it took is free to a larger one)
         out["largest_particles"] = int((have + need) / per)
     return out
+
+
+def memory_table(scene, backend: str, device: int = 0, particles: int = 20000) -> list[dict[str, Any]]:
+    """Bytes per particle of a scene of a kind with fluid and wall slots, for each of its
+    indexes (and, for `lists`, each list storage), and the largest count of particles the
+    backend's memory holds so (``corpuscle info --memory``). The estimate is the core's
+    (``_core.bytes_needed``) for the scene at about ``particles`` fluid particles (the bytes
+    a particle hardly depend on the size: the cells' table is a few bytes a particle)."""
+    from . import _core
+    from .kinds import Target, core, find, memory_available
+
+    kind = find(scene.kind)
+    indexes = dict(_core.kinds(hidden=True)).get(scene.kind, ())
+    small = scene.with_overrides({"fluid.particles": int(particles), "fluid.spacing": 0.0})
+    have, where = memory_available(Target(backend, "grid", device))
+    rows = []
+    for idx in indexes:
+        storages = ("slots", "delta") if idx == "lists" and "sph.list_storage" in scene.values else (None,)
+        for st in storages:
+            sc = small if st is None else small.with_overrides({"sph.list_storage": st})
+            params = kind.build(sc, Target(backend, idx, device)).params
+            n = int(params.get("n_fluid", 0)) + int(params.get("n_wall", 0))
+            if n <= 0:
+                continue
+            per = float(core().bytes_needed(scene.kind, idx, params)) / n
+            rows.append({"index": idx, "list_storage": st, "bytes_per_particle": per,
+                         "largest_particles": int(have / per) if have else None, "memory": have, "where": where})
+    return rows

@@ -79,6 +79,11 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
                        "until a particle has moved skin h / 2; 0 relists every step (0.08: the fastest of "
                        "0.04 to 0.2 over whole dam-break runs on the H200; a still column's first steps "
                        "favour 0.04, docs/benchmarks.md)"),
+        "sph.list_storage": _K("enum", "slots", "", doc="--neighbors lists: how the lists are stored: slots (four "
+                               "bytes an entry) or delta (each entry one byte, its difference to the one before, "
+                               "an escape and four bytes where that is not 1 to 254: about a quarter of the "
+                               "memory; the same entries in the same order, so the same results)",
+                               choices=("slots", "delta")),
         "sph.lanes": _K("int", 0, "", 0, 8,
                         "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
                         "(their partial sums merged in a fixed order); 0: chosen by the state's size (on CUDA the "
@@ -299,6 +304,12 @@ class SphBox(Kind):
         params["list_radius"] = h * (1.0 + skin)
         params["rebuild_distance"] = 0.5 * skin * h * (1.0 - 1e-5)  # (a margin for the float distances)
         params["max_neighbors"] = int(math.ceil((1.3 * mean + 32) / 32.0)) * 32 if target.index == "lists" else 1
+        delta = target.index == "lists" and v["sph.list_storage"] == "delta"
+        params["list_delta"] = int(delta)
+        if delta:
+            # bytes: an entry's byte, and four more for each escape (one a cell range with
+            # neighbours, 3^(D-1) of them: spatial/delta_list.h)
+            params["max_neighbors"] = int(math.ceil((1.3 * mean + 32 + 4 * 3 ** (D - 1)) / 32.0)) * 32
         params["lanes"] = int(v["sph.lanes"])
         check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
                      f"{nf_est + box_cells} particles")
