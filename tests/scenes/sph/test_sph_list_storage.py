@@ -115,3 +115,22 @@ def test_cuda_delta_lists_are_cuda_slot_lists_bit_for_bit(kind, lanes):
         pytest.skip("no CUDA")
     a, b = _pair(kind, backend="cuda", steps=40, particles=3000, sph__skin=0.1, sph__lanes=lanes)
     _same(a, b)
+
+
+def test_info_memory_lists_each_index():
+    import json as _json
+
+    from cli_script import corpuscle
+
+    proc = corpuscle("info", "--memory", "dam-break-dsph-building", "--backend", "cpu", "--json", timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    data = _json.loads(proc.stdout)
+    rows = {(r["index"], r["list_storage"]): r for r in data["rows"]}
+    assert {("lists", "slots"), ("lists", "delta"), ("grid", None), ("compact", None)} <= set(rows)
+    assert rows[("lists", "delta")]["bytes_per_particle"] < 0.5 * rows[("lists", "slots")]["bytes_per_particle"]
+    for r in rows.values():
+        if r["memory"]:
+            assert r["largest_particles"] == int(r["memory"] / r["bytes_per_particle"])
+    from cli_script import assert_one_line_error
+
+    assert_one_line_error(corpuscle("info", "--memory", "magic8ball"), "--memory")
