@@ -375,7 +375,7 @@ def test_directory_given(tmp_path):
 def test_unknown_scene():
     with pytest.raises(SceneError) as e:
         load_scene("foo")
-    assert str(e.value) == ("unknown scene 'foo' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, "
+    assert str(e.value) == ("unknown scene 'foo' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, dam-break-dsph-building, "
                             "dam-break-obstacle, floating-box, floating-box-2d, fluid-box, lid-driven-cavity, magic8ball, "
                             "piston-wave-maker, poiseuille, "
                             "taylor-green, wind-tunnel, wind-tunnel-3d)")

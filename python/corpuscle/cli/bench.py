@@ -155,6 +155,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
             if warmup:
                 sim.step(warmup)
             relists = relistings(sim)
+            t_sim0 = float(sim.time) if batch is None else None
             times = []
             for _ in range(repeats):
                 times.append(float(sim.bench_steps(steps)))
@@ -196,8 +197,15 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 row["rebuilds"] = int(state["rebuilds"])
                 row["steps_taken"] = int(state["step"])
                 row["timed_rebuilds"] = relists
-            if batch is None and "n_wall" in (getattr(sim, "info", None) or {}):
-                row["wall_particles"] = int(sim.info["n_wall"])
+            if batch is None:
+                # time to solution: the timed steps' wall seconds per simulated second, and the
+                # particles' kinds and memory (corpuscle/_solution.py)
+                from .. import _solution
+
+                row["wall_seconds_per_sim_second"] = _solution.wall_per_sim_second(
+                    sum(times), float(sim.time) - t_sim0)
+                row.update(_solution.particle_counts(sim))
+                row.update(_solution.memory_per_particle(sim))
             if (backend == "cuda" or args.stages) and batch is None:
                 row["stages"] = {str(k): float(v) for k, v in dict(sim.stage_times(steps)).items()}
             rows.append(row)
@@ -255,6 +263,9 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
     nbr = any("mean_neighbors" in r for r in rows)
     head = f"{'backend':<8} " + (f"{'batch':>7} " if batched else "") + f"{'particles':>10} {'init(s)':>8} {'steps/s':>12} "
     head += (f"{'scene-steps/s':>14} " if batched else "") + f"{'particle-steps/s':>18}"
+    tts = any(r.get("wall_seconds_per_sim_second") is not None for r in rows)
+    if tts:
+        head += f" {'wall s/sim s':>12}"
     if sweep or nbr:
         head = f"{'index':<9}" + head + f" {'neighbours':>10}"
     print(head + (f" {'speedup':>9}" if serial else ""))
@@ -268,6 +279,9 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
                 f"{r['particles']:>10,} {init_text} {fmt_rate(r['steps_per_second']):>12} " +
                 (f"{fmt_rate(r['scene_steps_per_second']):>14} " if batched else "") +
                 f"{fmt_rate(r['particle_steps_per_second']):>18}")
+        if tts:
+            w = r.get("wall_seconds_per_sim_second")
+            line += f" {w:12.4g}" if isinstance(w, (int, float)) else f" {'':>12}"
         if sweep or nbr:
             mn = r.get("mean_neighbors")
             line += f" {mn:10.1f}" if isinstance(mn, (int, float)) else f" {'':>10}"
@@ -292,6 +306,16 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
             share = 100.0 * ms / total if total > 0 else 0.0
             print(f"  {name:<{width}}  {ms:9.4f}  {share:5.1f}%")
         print(f"  {'total':<{width}}  {total:9.4f}")
+    for r in rows:
+        if r.get("fluid_particles") is None:
+            continue
+        what = f"{r['backend']}" + (f", {r['neighbors']}" if r.get("neighbors") else "")
+        line = f"{what}: {r['fluid_particles']:,} fluid + {r['wall_particles']:,} wall particles"
+        if r.get("bytes_per_particle") is not None:
+            line += f", {r['bytes_per_particle']:,.0f} bytes a particle"
+            if r.get("largest_particles"):
+                line += f" (the device holds about {r['largest_particles']:,})"
+        print(line)
 
 
 register(Command("bench", "time steps per second on each backend", _configure_bench, _cmd_bench))

@@ -260,6 +260,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                         neighbors=args.neighbors, device=args.device)
     sim.set_end_time(plan.end_time)  # the core shortens the last step to land on it
     start_steps = int(sim.steps)
+    start_sim_time = float(sim.time)
     start_relists = relistings(sim)
     init_seconds = time.perf_counter() - t_init
     backend = str(getattr(sim, "backend", args.backend))
@@ -393,6 +394,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         summary["resumed_at_step"] = plan.resume["step"]
     if start_relists is not None:
         summary["relistings"] = relistings(sim) - start_relists
+    # time to solution and the particles' kinds and memory (corpuscle/_solution.py)
+    from .. import _solution
+
+    summary["wall_seconds_per_sim_second"] = _solution.wall_per_sim_second(wall, float(sim.time) - start_sim_time)
+    summary.update(_solution.particle_counts(sim))
+    summary.update(_solution.memory_per_particle(sim))
     if args.json:
         print(_json.dumps(summary))
     else:
@@ -426,6 +433,14 @@ def print_summary(s: dict[str, Any], scene) -> None:
         ("steps/s", fmt_rate(s["steps_per_second"])),
         ("particle-steps/s", fmt_rate(s["particle_steps_per_second"])),
     ]
+    if s.get("wall_seconds_per_sim_second") is not None:
+        rows.append(("wall s per simulated s", f"{s['wall_seconds_per_sim_second']:.4g}"))
+    if s.get("fluid_particles") is not None:
+        rows.append(("fluid / wall particles", f"{s['fluid_particles']:,} / {s['wall_particles']:,}"))
+    if s.get("bytes_per_particle") is not None:
+        most = s.get("largest_particles")
+        rows.append(("memory", f"{s['bytes_per_particle']:,.0f} bytes a particle ({_kinds.fmt_bytes(s['bytes_needed'])})" +
+                     (f"; the device holds about {most:,} particles so" if most else "")))
     if s.get("relistings") is not None:
         share = f" ({100.0 * s['relistings'] / s['steps']:.0f}% of the steps)" if s["steps"] else ""
         rows.append(("relistings", f"{s['relistings']:,}{share}"))

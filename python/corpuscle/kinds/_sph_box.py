@@ -80,6 +80,11 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
                        "until a particle has moved skin h / 2; 0 relists every step (0.08: the fastest of "
                        "0.04 to 0.2 over whole dam-break runs on the H200; a still column's first steps "
                        "favour 0.04, docs/benchmarks.md)"),
+        "sph.list_storage": _K("enum", "slots", "", doc="--neighbors lists: how the lists are stored: slots (four "
+                               "bytes an entry) or delta (each entry one byte, its difference to the one before, "
+                               "an escape and four bytes where that is not 1 to 254: about a quarter of the "
+                               "memory; the same entries in the same order, so the same results)",
+                               choices=("slots", "delta")),
         "sph.lanes": _K("int", 0, "", 0, 8,
                         "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
                         "(their partial sums merged in a fixed order); 0: chosen by the state's size (on CUDA the "
@@ -107,6 +112,11 @@ def boundary_keys(dim: int) -> dict[str, KeySpec]:
                            + "xyz"[dim - 1] + "-); their particles carry walls.velocity in the pair terms and stay "
                            "in place (a wall sliding in its own plane)"),
         "walls.velocity": _K(vec, [0.0] * dim, "m/s", -1e4, 1e4, "the moving walls' velocity (tangential to them)"),
+        "walls.layers": _K("int", 0, "dp", 0, 64, "lattice layers of wall (DBC) particles outside each face of the "
+                           "box and inside each body's surface; 0: as deep as the kernel support, ceil(2 hs / dp) "
+                           "(4 at hs = 1.732 dp); 1: DualSPHysics's drawing of a wall as one layer (about a quarter "
+                           "of the wall particles; the fluid then sees a truncated kernel at the wall: "
+                           "docs/sph_box.md)"),
         "fluid.body_force": _K(vec, [0.0] * dim, "m/s^2", -1e6, 1e6, "a body acceleration added to gravity (drives "
                                "a periodic channel: Poiseuille flow)"),
         "fluid.background_pressure": _K("float", 0.0, "Pa", 0.0, 1e9, "a constant added to the pressure in the "
@@ -250,7 +260,9 @@ class SphBox(Kind):
         smoothing = float(v["sph.smoothing"])
         hs = smoothing * dp
         h = 2.0 * hs
-        layers = int(math.ceil(h / dp - 1e-6))
+        support_layers = int(math.ceil(h / dp - 1e-6))
+        # walls.layers: the DBC walls' thickness in lattice layers (0: the kernel support's)
+        layers = int(v["walls.layers"]) or support_layers
         # periodic axes: no wall layers across them (the walls of the other axes span the period)
         periodic = np.array(["xyz"[k] in v["boundary.periodic"] for k in range(D)])
         wall_layers = np.where(periodic, 0, layers)
@@ -307,6 +319,12 @@ class SphBox(Kind):
         params["list_radius"] = h * (1.0 + skin)
         params["rebuild_distance"] = 0.5 * skin * h * (1.0 - 1e-5)  # (a margin for the float distances)
         params["max_neighbors"] = int(math.ceil((1.3 * mean + 32) / 32.0)) * 32 if target.index == "lists" else 1
+        delta = target.index == "lists" and v["sph.list_storage"] == "delta"
+        params["list_delta"] = int(delta)
+        if delta:
+            # bytes: an entry's byte, and four more for each escape (one a cell range with
+            # neighbours, 3^(D-1) of them: spatial/delta_list.h)
+            params["max_neighbors"] = int(math.ceil((1.3 * mean + 32 + 4 * 3 ** (D - 1)) / 32.0)) * 32
         params["lanes"] = int(v["sph.lanes"])
         check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
                      f"{nf_est + box_cells} particles")
@@ -348,7 +366,7 @@ class SphBox(Kind):
             arrays["wall_velocity"] = np.ascontiguousarray(wall_vel, dtype=np.float32).reshape(-1, D)
         arrays.update(moving)
         info = {"spacing": dp, "h": h, "hs": hs, "mass": rho0 * dp ** D, "rho0": rho0, "c0": c0, "B": B,
-                "gamma": gamma, "gravity": g, "layers": layers, "box": box_hi.copy(), "fluid_height": height,
+                "gamma": gamma, "gravity": g, "layers": layers, "support_layers": support_layers, "box": box_hi.copy(), "fluid_height": height,
                 "fluid_lo": f0 * dp, "fluid_hi": f1 * dp, "n_fluid": nf_est, "n_wall": int(box_cells),
                 "probe_names": [str(p["name"]) for p in scene.arrays.get("probes", [])],
                 "probe_gauges": [is_gauge(p) for p in scene.arrays.get("probes", [])],

@@ -37,6 +37,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--dim", choices=("2", "3"), default="2", help="2-D or 3-D (default: 2)")
     parser.add_argument("--time", metavar="T", default=str(SETTLE), help=f"settling time in s (default: {SETTLE})")
     parser.add_argument("--full", action="store_true", help="four times the particles")
+    parser.add_argument("--wall-layers", metavar="L", default="0",
+                        help="wall (DBC) particle layers outside each face (walls.layers; 0, the default: as deep "
+                             "as the kernel support; 1: DualSPHysics's one layer)")
 
 
 def run(args) -> list[Check]:
@@ -56,7 +59,14 @@ def run(args) -> list[Check]:
         raise ValueError(f"--time must be a number, got {args.time!r}") from None
     if not (math.isfinite(t_end) and t_end > 0):
         raise ValueError(f"--time must be a positive number of seconds, got {args.time!r}")
-    over = {"fluid.particles": n, "dam.a": WIDTH, "dam.height": HEIGHT / WIDTH, "dam.tank_length": 1.0,
+    layers = getattr(args, "wall_layers", "0")
+    try:
+        layers = int(layers)
+    except (TypeError, ValueError):
+        raise ValueError(f"--wall-layers must be a whole number of layers, got {layers!r}") from None
+    if not 0 <= layers <= 64:
+        raise ValueError(f"--wall-layers must be 0 (the kernel support's) to 64, got {layers}")
+    over = {"walls.layers": layers, "fluid.particles": n, "dam.a": WIDTH, "dam.height": HEIGHT / WIDTH, "dam.tank_length": 1.0,
             "dam.tank_height": 1.25 * HEIGHT / WIDTH, "probes": [], "run.end_time": t_end}
     if dim == 3:
         over["dam.depth"] = 1.0
@@ -98,7 +108,8 @@ def run(args) -> list[Check]:
     rows_a = np.array(rows)
     rel = np.abs(rows_a[:, 1] - rows_a[:, 2]) / rows_a[:, 2]
     worst = int(np.argmax(rel))
-    print(f"\nhydrostatic {dim}-D tank, {n_fluid} fluid particles (dp = {dp:.4g} m), t = {t_end:g} s")
+    print(f"\nhydrostatic {dim}-D tank, {n_fluid} fluid particles (dp = {dp:.4g} m), {info['layers']} wall "
+          f"layer(s), t = {t_end:g} s")
     print(f"  {'depth (m)':>10} {'p (Pa)':>10} {'rho g d':>10} {'rel':>8}")
     for (d, p, pr), r in zip(rows, rel):
         print(f"  {d:10.4f} {p:10.1f} {pr:10.1f} {r:8.4f}")

@@ -143,6 +143,12 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   if (!(rebuild >= 0.0f) || !(2.0f * rebuild <= m.list_radius - m.h + 1e-6f * m.h))
     throw Error(std::string(kind) + ": rebuild_distance must be in [0, (list_radius - h) / 2], got " + std::to_string(rebuild));
   if (m.max_neighbors < 1) throw Error(std::string(kind) + ": max_neighbors must be at least 1");
+  m.list_delta = p.has("list_delta") ? int(p.integer("list_delta")) : 0;
+  if (m.list_delta != 0 && m.list_delta != 1)
+    throw Error(std::string(kind) + ": list_delta must be 0 or 1, got " + std::to_string(p.integer("list_delta")));
+  if (m.list_delta == 1 && m.max_neighbors < 5)
+    throw Error(std::string(kind) + ": delta-coded lists need max_neighbors >= 5 bytes, got " +
+                std::to_string(m.max_neighbors));
   m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
   if (m.lanes != 0 && m.lanes != 1 && m.lanes != 2 && m.lanes != 4 && m.lanes != 8)
     throw Error(std::string(kind) + ": lanes must be 0 (automatic), 1, 2, 4 or 8, got " + std::to_string(p.integer("lanes")));

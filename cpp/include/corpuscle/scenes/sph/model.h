@@ -93,6 +93,10 @@ struct Model {
   float list_radius;
   float rebuild_disp2;
   int max_neighbors;
+  // the `lists` index's storage: 0 the slot lists' four bytes an entry (max_neighbors entries a
+  // slot), 1 delta-coded bytes (spatial/delta_list.h: max_neighbors bytes a slot); the same
+  // entries in the same order either way
+  int list_delta;
   // the `lists` pair pass: lanes sharing a particle's list (1, 2, 4 or 8; CUDA threads, the CPU
   // runs them in turn); 0 in the parameters: chosen by the pipeline (auto_list_lanes)
   int lanes;

@@ -35,6 +35,7 @@
 #include "corpuscle/scenes/sph/tables.h"
 #include "corpuscle/spatial/allpairs.h"
 #include "corpuscle/spatial/compact_grid.h"
+#include "corpuscle/spatial/delta_list.h"
 #include "corpuscle/spatial/neighbor_list.h"
 
 namespace cps::sph {
@@ -135,11 +136,17 @@ class Pipeline {
                        sizeof(StepSums) + sizeof(int) + 4 * sizeof(uint64_t) + 2 * sizeof(int) +
                        (std::is_same_v<Index, CompactIndex> ? 2 * sizeof(int) : 0) + (kLists ? sizeof(Vec<D>) : 0));
     const double cells = 2.0 * double(grid_spec(m).table_size()) * sizeof(uint32_t);
-    const double lists = kLists ? SlotNeighborList<D, Exec>::bytes(int(n), m.max_neighbors) : 0.0;
+    const double lists = kLists ? list_bytes(m, int(n), m.max_neighbors) : 0.0;
     const double bodies = m.n_moving > 0 ? double(m.n_wall) * (sizeof(int) + 3 * sizeof(float)) : 0.0;
     const double free = m.n_free > 0 ? double(m.n_wall) * (sizeof(int) + sizeof(BodyItem)) : 0.0;
     const double tvf = m.tvf ? n * 3.0 * sizeof(Vec<D>) : 0.0;  // (transport_, transport_acc_)
     return n * per + cells + lists + bodies + free + tvf + sizeof(ModelT);
+  }
+
+  // the lists' bytes for n slots of `capacity` (entries, or bytes when delta-coded)
+  static double list_bytes(const ModelT& m, int n, int capacity) {
+    return m.list_delta ? DeltaSlotNeighborList<D, Exec>::bytes(n, capacity)
+                        : SlotNeighborList<D, Exec>::bytes(n, capacity);
   }
 
   CPS_KIND_STORED_TABLES(CPS_SPH_FIELDS, CPS_SPH_WALL_FIELDS, CPS_SPH_SCALARS, CPS_SPH_CONTROLS, Scene, Control,
@@ -162,7 +169,7 @@ class Pipeline {
       if (!(m.list_radius >= m.h) || !(m.rebuild_disp2 >= 0.0f) || m.max_neighbors < 1)
         throw Error(std::string(kind) + ": lists need list_radius >= h, rebuild_distance >= 0 and max_neighbors >= 1");
       x_build_.resize(n_);
-      lists_.reserve(ex_, n_, m.max_neighbors);
+      reserve_lists();
     }
     items_.resize(n_);
     tags_.resize(n_);
@@ -209,16 +216,17 @@ class Pipeline {
       bool overflow = false;
       for (const R& r : recs) overflow = overflow || r.clock.bad == kBadNeighbors;
       if (!overflow) return false;
-      const int need = lists_.max_count(ex_);
+      const int need = m_.list_delta ? dlists_.max_count(ex_) : lists_.max_count(ex_);
       long long want = (long long)(1.25 * double(need)) + 32;
       want = (want + 31) / 32 * 32;
-      if (want > n_) want = n_;  // never more than every other slot
+      if (want > n_ && !m_.list_delta) want = n_;  // never more than every other slot
+      if (m_.list_delta && want > 5LL * n_ + 32) want = 5LL * n_ + 32;  // (every other slot escaped)
       if (want <= m_.max_neighbors) return false;
-      const double extra = SlotNeighborList<D, Exec>::bytes(n_, int(want)) - SlotNeighborList<D, Exec>::bytes(n_, m_.max_neighbors);
+      const double extra = list_bytes(m_, n_, int(want)) - list_bytes(m_, n_, m_.max_neighbors);
       if (extra > bytes_free) return false;
       m_.max_neighbors = int(want);
       ex_.to_device(model_.data(), &m_, sizeof(ModelT));
-      lists_.reserve(ex_, n_, m_.max_neighbors);
+      reserve_lists();
       for (R& r : recs)
         if (r.clock.bad == kBadNeighbors) {  // the step was not taken: it is repeated, relisting
           r.clock.bad = 0;
@@ -321,10 +329,8 @@ class Pipeline {
     CellGridView<D> gv = grid_.view(s.position);
     if constexpr (std::is_same_v<Index, CompactIndex>) compact_.build(ex_, gv);
     if constexpr (kLists) {
-      lists_.template fill<kListFillLanes>(ex_, gv, m_.list_radius, 0, nf_, &g->clock.bad, kBadNeighbors, &g->rebuild);
-      if (n_ > nf_)  // the walls list the fluid only
-        lists_.template fill<kListFillLanes>(ex_, gv.tags(kTagFluid, kTagFluid + 1), m_.list_radius, nf_, n_ - nf_, &g->clock.bad,
-                    kBadNeighbors, &g->rebuild);
+      if (m_.list_delta) fill_lists(dlists_, gv, g);
+      else fill_lists(lists_, gv, g);
     }
     ex_.mark(0);
     // 2. the pair sums through the index (the default model's terms fixed at compile time,
@@ -463,7 +469,9 @@ class Pipeline {
     if constexpr (kLists) {
       // (the walk reads the records' positions: the first member, a record apart)
       constexpr int stride = int(sizeof(PairRecord<D>) / sizeof(VecA<D>));
-      list_pass_lanes(lists_.view(reinterpret_cast<const VecA<D>*>(s.rec), m_.h, stride, m_.per), st);
+      const VecA<D>* rp = reinterpret_cast<const VecA<D>*>(s.rec);
+      if (m_.list_delta) list_pass_lanes(dlists_.view(rp, m_.h, stride, m_.per), st);
+      else list_pass_lanes(lists_.view(rp, m_.h, stride, m_.per), st);
     } else if constexpr (std::is_same_v<Index, AllPairsIndex>) {
       AllPairsView<D> av{s.position, n_, m_.h * m_.h, m_.per};
       if constexpr (Exec::on_device) gather_stage_tiled<kAllPairsTile>(ex_, av, st);
@@ -475,8 +483,21 @@ class Pipeline {
       if (n_ > nf_) ex_.template for_each_bounded<kPairBlocksPerSM>(n_ - nf_, GridGatherFn<D, Stage>{gv, st, nf_, nf_});
     }
   }
-  template <class Stage>
-  void list_pass_lanes(const SlotListView<D>& lv, const Stage& st) {
+  // the lists' storage (the model's list_delta) with room for max_neighbors
+  void reserve_lists() {
+    if (m_.list_delta) dlists_.reserve(ex_, n_, m_.max_neighbors);
+    else lists_.reserve(ex_, n_, m_.max_neighbors);
+  }
+  // the lists' build on the steps that relist: the fluid's, then the walls' (of the fluid only)
+  template <class Lists>
+  void fill_lists(Lists& lists, const CellGridView<D>& gv, Scene* g) {
+    lists.template fill<kListFillLanes>(ex_, gv, m_.list_radius, 0, nf_, &g->clock.bad, kBadNeighbors, &g->rebuild);
+    if (n_ > nf_)  // the walls list the fluid only
+      lists.template fill<kListFillLanes>(ex_, gv.tags(kTagFluid, kTagFluid + 1), m_.list_radius, nf_, n_ - nf_,
+                                          &g->clock.bad, kBadNeighbors, &g->rebuild);
+  }
+  template <class LV, class Stage>
+  void list_pass_lanes(const LV& lv, const Stage& st) {
     switch (m_.lanes) {
       case 2: list_pass<2>(lv, st); break;
       case 4: list_pass<4>(lv, st); break;
@@ -485,14 +506,14 @@ class Pipeline {
     }
   }
   // the `lists` pair pass with G lanes per particle (the fluid, then the walls)
-  template <int G, class Stage>
-  void list_pass(const SlotListView<D>& lv, const Stage& st) {
+  template <int G, class LV, class Stage>
+  void list_pass(const LV& lv, const Stage& st) {
     if constexpr (G == 1) {
-      using Fn = ListGatherFn<SlotListView<D>, Stage>;
+      using Fn = ListGatherFn<LV, Stage>;
       ex_.template for_each_bounded<kListPairBlocksPerSM>(nf_, Fn{lv, st, 0});
       if (n_ > nf_) ex_.template for_each_bounded<kListPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
     } else {
-      using Fn = ListGatherLanesFn<G, SlotListView<D>, Stage>;
+      using Fn = ListGatherLanesFn<G, LV, Stage>;
       ex_.template for_each_lanes_w_bounded<G, kListPairBlocksPerSM>(nf_, Fn{lv, st, 0});
       if (n_ > nf_) ex_.template for_each_lanes_w_bounded<G, kListPairBlocksPerSM>(n_ - nf_, Fn{lv, st, nf_});
     }
@@ -551,6 +572,7 @@ class Pipeline {
   Buf<Vec<D>> transport_[2];   // the transport velocity's v~ - v (current and other, by parity)
   Buf<Vec<D>> transport_acc_;  // its step's background push
   SlotNeighborList<D, Exec> lists_;
+  DeltaSlotNeighborList<D, Exec> dlists_;  // (list_delta: the lists delta-coded)
   bool relist_ = false;
   Buf<StepSums> items_;
   Buf<float> table_;      // the moving bodies' motion tables
