@@ -83,6 +83,10 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
                         "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
                         "(their partial sums merged in a fixed order); 0: chosen by the state's size (on CUDA the "
                         "fewest, up to 8, that give 400,000 threads; the CPU backends 1)"),
+        "sph.order_by_id": _K("bool", False, "", doc="break the sort's ties within a cell by particle id, so "
+                              "every particle's neighbours are summed in an order independent of its slot (a run "
+                              "split over MPI ranks forces it on, and is then bitwise this one-process run; off: "
+                              "one sort pass fewer)"),
         "timestep.cfl": _K("float", 0.2, "", 0.0, 1.0, "CFL number of the time step (DualSPHysics: 0.2)", lo_open=True),
         "timestep.dt_min": _K("float", 1e-9, "s", 0.0, 1.0, "smallest time step", lo_open=True),
         "timestep.dt_max": _K("float", 1e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),
@@ -293,6 +297,7 @@ class SphBox(Kind):
         params["rebuild_distance"] = 0.5 * skin * h * (1.0 - 1e-5)  # (a margin for the float distances)
         params["max_neighbors"] = int(math.ceil((1.3 * mean + 32) / 32.0)) * 32 if target.index == "lists" else 1
         params["lanes"] = int(v["sph.lanes"])
+        params["order_by_id"] = int(bool(v["sph.order_by_id"]))
         check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
                      f"{nf_est + box_cells} particles")
         # the walls: every lattice point of the box widened by `layers` that is not inside it
