@@ -115,6 +115,7 @@ class RankedCore:
                             f"the {self.size} ranks: use fewer ranks or a smaller spacing")
         self.ncell = ncell
         self.relists_always = index != "lists"
+        self.maps_stale = True
         self.outside_max = 0
         self.outside = 0
         self.bad = 0
@@ -309,8 +310,10 @@ class RankedCore:
             self._refresh_halo()
         for _ in range(8):
             t0 = _time.perf_counter()
-            sums, bad, _, _, _ = self.raw.step_half(0)
+            sums, bad, relisting, _, _ = self.raw.step_half(0)
             self.step_seconds += _time.perf_counter() - t0
+            if relisting:
+                self.maps_stale = True  # (the step sorts: the halo's slots move)
             halves = self.comm.allgather((sums, int(bad)))
             if not any(b == _BAD_NEIGHBORS for _, b in halves):
                 break
@@ -561,6 +564,9 @@ def ranked_simulation(scene, backend: str, comm, checkpoint: dict | None = None,
     from .simulation import BackendError, Simulation, _check_state, _core, resolve_backend
 
     check_splittable(scene, comm.Get_size(), neighbors)
+    if not scene.values.get("sph.order_by_id", False):
+        scene = scene.with_overrides({"sph.order_by_id": True})  # (the header records it: a resume on one
+        #                                                          rank sorts as these ranks do)
     if checkpoint is not None:
         _check_state(checkpoint)
     sim = Simulation.__new__(Simulation)
