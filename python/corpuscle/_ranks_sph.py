@@ -89,12 +89,15 @@ class RankedCore:
         self.nf = int(params["n_fluid"])
         self.nw = int(params["n_wall"])
         self.n = self.nf + self.nw
-        # the rank's core, made for one particle and then given its slots (set_counts)
-        one = {"position": np.zeros((1, D), np.float32), "velocity": np.zeros((1, D), np.float32),
-               "density": np.full(1, float(params.get("rho0", 1000.0)), np.float32),
-               "wall_position": np.zeros((0, D), np.float32), "wall_density": np.zeros(0, np.float32)}
-        small = dict(params, n_fluid=1, n_wall=0)
-        self.raw = core.Simulation(kind.name, backend, index, small, one, device)
+        # the rank's core, made for its share of the fluid (what sizes its buffers at first and picks
+        # the lists' lanes on CUDA, as a one-process run of that size would) and then given its
+        # slots (set_counts)
+        share = max(1, self.nf // comm.Get_size())
+        rho0 = float(np.asarray(built.arrays["density"]).reshape(-1)[0]) if self.nf else 1000.0
+        start = {"position": np.zeros((share, D), np.float32), "velocity": np.zeros((share, D), np.float32),
+                 "density": np.full(share, rho0, np.float32),
+                 "wall_position": np.zeros((0, D), np.float32), "wall_density": np.zeros(0, np.float32)}
+        self.raw = core.Simulation(kind.name, backend, index, dict(params, n_fluid=share, n_wall=0), start, device)
         self._snapshot: dict[str, Any] | None = None
         self._override: dict[str, Any] = {}
         # the decomposition: slabs along the longest axis that does not wrap
