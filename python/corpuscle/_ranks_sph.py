@@ -119,6 +119,12 @@ class RankedCore:
         self.ncell = ncell
         self.relists_always = index != "lists"
         self.maps_stale = True
+        # load balancing (run.rebalance: max / mean of the ranks' core time since the last
+        # balance above which the cuts move; 0: never)
+        self.rebalance = float(built.params.get("rebalance", 0.0) or 0.0)
+        self.rebalances = 0
+        self._balanced_at = 0.0
+        self.params = params
         self.outside_max = 0
         self.outside = 0
         self.bad = 0
@@ -133,6 +139,7 @@ class RankedCore:
         if checkpoint is not None:
             self._restore_scalars(checkpoint)
         # the probes: each read on the rank whose slab and halo hold its support
+        self.probe_owner = []
         self.probe_owner = self._probe_owners(params)
 
     # ---- the whole scene and its decomposition ------------------------------------------
@@ -176,10 +183,15 @@ class RankedCore:
         return {"position": pos, "velocity": vel, "density": rho, "id": np.arange(nf + nw, dtype=np.int32),
                 "velocity_prev": vprev, "density_prev": rprev}
 
+    def _cells(self, x: np.ndarray) -> np.ndarray:
+        return np.clip(np.floor((x - self.lo) / self.cell).astype(np.int64), 0, self.ncell - 1)
+
     def _balanced_cuts(self, x: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
         """R - 1 cuts on cell boundaries that split the weight (default: the particles) evenly."""
-        cellx = np.clip(np.floor((x - self.lo) / self.cell).astype(np.int64), 0, self.ncell - 1)
-        w = np.bincount(cellx, weights=weight, minlength=self.ncell).astype(np.float64)
+        return self._cuts_of(np.bincount(self._cells(x), weights=weight, minlength=self.ncell).astype(np.float64))
+
+    def _cuts_of(self, w: np.ndarray) -> np.ndarray:
+        """R - 1 cuts on cell boundaries that split the cells' weights w evenly."""
         cum = np.cumsum(w)
         total = cum[-1] if cum.size else 0.0
         cuts, prev = [], 0
@@ -305,9 +317,46 @@ class RankedCore:
         self.exchange_seconds += _time.perf_counter() - t0
 
     # ---- stepping -------------------------------------------------------------------------
+    def _maybe_rebalance(self) -> None:
+        """At a relisting: when the ranks' core time since the last balance is out of balance by
+        more than run.rebalance (max / mean), new cuts that split the measured work evenly: each
+        rank's time spread over its own particles, summed per cell over the ranks (in rank order:
+        the same cuts on every rank). The physics does not depend on the cuts (bitwise), so only
+        the time changes."""
+        if self.rebalance <= 0.0 or self.size == 1:
+            return
+        spent = self.step_seconds - self._balanced_at
+        n = self.raw.slots()
+        slots = np.arange(n, dtype=np.int32)
+        own = slots[self.raw.get_slots("halo", slots) == 0]
+        x = self.raw.get_slots("position", own)[:, self.axis] if len(own) else np.zeros(0)
+        cost = spent / len(own) if len(own) else 0.0
+        rows = self.comm.allgather((spent, np.bincount(self._cells(x), minlength=self.ncell) * cost))
+        t = [r[0] for r in rows]
+        mean = sum(t) / len(t)
+        if not (mean > 0.0 and max(t) / mean > self.rebalance):
+            return
+        w = np.zeros(self.ncell)
+        for r in rows:
+            w = w + r[1]
+        cuts = self._cuts_of(w)
+        if np.array_equal(cuts, self.cuts):
+            return
+        if self.probe_owner:
+            # every rank's record takes the probes' readings and series of their holders, so the
+            # new holder of a probe goes on from its holder's ring
+            self._gather_probes()
+            for name, _ in self._PROBE_KEYS + (("probe_series_time", 0), ("probe_series_pressure", 0)):
+                self.raw.set_scalar(name, self._override[name])
+        self.cuts = cuts
+        self.probe_owner = self._probe_owners(self.params)
+        self.rebalances += 1
+        self._balanced_at = self.step_seconds
+
     def _one_step(self, relist: bool) -> bool:
         """One step of every rank; False when it was not taken (the end, or unsound)."""
         if relist:
+            self._maybe_rebalance()
             self._migrate()
         else:
             self._refresh_halo()
@@ -339,14 +388,14 @@ class RankedCore:
 
     def step(self, n: int) -> int:
         """Up to n steps of every rank (all stop together: the end time and the flags are global)."""
-        first = int(self._local()["step"])
+        one = self.raw.scalar_of_scenes  # (one value of the record: no dictionary of them all)
+        first = int(one("step")[0])
         for _ in range(int(n)):
-            s = self._local()
-            if s["done"] or s["bad"] or self.bad:
+            if one("done")[0] or one("bad")[0] or self.bad:
                 break
             self._one_step(self.need_relist)
         self._gather_probes()
-        return int(self._local()["step"]) - first
+        return int(one("step")[0]) - first
 
     # ---- the scalars -----------------------------------------------------------------------
     def _local(self) -> dict[str, Any]:
@@ -554,7 +603,8 @@ class RankedCore:
         mean = sum(t) / len(t) if t else 0.0
         return {"ranks": self.size, "axis": "xyz"[self.axis], "owned": [r[0] for r in rows],
                 "halo": [r[1] for r in rows], "core_seconds": t, "exchange_seconds": [r[3] for r in rows],
-                "imbalance": (max(t) / mean) if mean > 0 else 1.0, "migrations": self.migrations}
+                "imbalance": (max(t) / mean) if mean > 0 else 1.0, "migrations": self.migrations,
+                "rebalances": self.rebalances, "cuts": [float(c) for c in self.cuts]}
 
 
 def ranked_simulation(scene, backend: str, comm, checkpoint: dict | None = None, neighbors: str | None = None,

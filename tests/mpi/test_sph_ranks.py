@@ -34,7 +34,10 @@ import numpy as np
 from corpuscle import Simulation, _mpi
 comm = _mpi.world()
 scene, particles, steps, index = sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
-if len(sys.argv) > 6:  # the distributed path on one rank (MPI's COMM_SELF, no launcher)
+extra = {"sph.order_by_id": True}
+if len(sys.argv) > 6 and sys.argv[6].startswith("rebalance="):  # load balancing at this threshold
+    extra["run.rebalance"] = float(sys.argv[6].split("=")[1])
+elif len(sys.argv) > 6:  # the distributed path on one rank (MPI's COMM_SELF, no launcher)
     from mpi4py import MPI
     comm = MPI.COMM_SELF
     from corpuscle._ranks_sph import ranked_simulation
@@ -42,8 +45,9 @@ if len(sys.argv) > 6:  # the distributed path on one rank (MPI's COMM_SELF, no l
     sim = ranked_simulation(load_scene(scene).with_overrides({"fluid.particles": particles, "sph.order_by_id": True}),
                             "cpu", comm, neighbors=index)
 else:
+if "sim" not in dir():
     sim = Simulation.from_scene(scene, backend="cpu", particles=particles, neighbors=index, comm=comm,
-                                overrides={"sph.order_by_id": True})
+                                overrides=extra)
 sim.set_end_time(1e9)
 xs, cuts = [], getattr(sim.core, "cuts", np.zeros(0))
 for k in range(steps // 10):
@@ -53,7 +57,8 @@ st = sim.state()
 out = dict(position=sim.field("position"), velocity=sim.field("velocity"), density=sim.field("density"),
            id=sim.field("id"), wall_density=sim.field("wall_density"), wall_id=sim.field("wall_id"),
            time=st["time"], step=st["step"], rebuilds=st["rebuilds"], ke=st["kinetic_energy"],
-           vmax=st["vmax"], rho_max=st["rho_max"], nbrs=st["mean_neighbors"], x=np.array(xs), cuts=np.asarray(cuts))
+           vmax=st["vmax"], rho_max=st["rho_max"], nbrs=st["mean_neighbors"], x=np.array(xs), cuts=np.asarray(cuts),
+           rebalances=getattr(sim.core, "rebalances", 0))
 if comm is None or comm.Get_rank() == 0:
     np.savez(sys.argv[1], **out)
 """
@@ -91,10 +96,12 @@ def _same(a, b):
 @pytest.mark.parametrize("ranks", [2, 3])
 def test_dam_break_2d_over_ranks_is_the_one_process_run(tmp_path, ranks):
     # the lists index, through the impact on the far wall (T = 3.5; 2,000 steps at 300 particles),
-    # the fluid crossing the slab cuts many times: bitwise
+    # the fluid crossing the slab cuts many times: bitwise. Three ranks rebalance (run.rebalance,
+    # a threshold any measured imbalance passes: the cuts move as the fluid runs down the tank)
     args = ["dam-break-2d", "300", "1500", "lists"]
     one = _one_process(tmp_path, args)
-    r = launch(ranks, [str(_job(tmp_path)), str(tmp_path / "many.npz"), *args], tmp_path, timeout=300)
+    rebalance = ["rebalance=1.0001"] if ranks == 3 else []
+    r = launch(ranks, [str(_job(tmp_path)), str(tmp_path / "many.npz"), *args, *rebalance], tmp_path, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     many = np.load(tmp_path / "many.npz")
     _same(one, many)
@@ -102,6 +109,7 @@ def test_dam_break_2d_over_ranks_is_the_one_process_run(tmp_path, ranks):
     side = np.searchsorted(many["cuts"], many["x"], side="right")
     crossings = int(np.count_nonzero(np.diff(side, axis=0)))
     assert len(many["cuts"]) == ranks - 1 and crossings > 100, crossings
+    assert int(many["rebalances"]) >= (1 if rebalance else 0)
 
 
 def test_distributed_path_on_one_rank_and_the_grid_index(tmp_path):

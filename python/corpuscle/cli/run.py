@@ -436,7 +436,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         bal = sim.core.balance()  # (every rank: a collective)
         summary["ranks"] = bal["ranks"]
         summary["imbalance"] = bal["imbalance"]
-        summary["decomposition"] = {k: bal[k] for k in ("axis", "owned", "halo", "migrations")}
+        summary["decomposition"] = {k: bal[k] for k in ("axis", "owned", "halo", "migrations", "rebalances", "cuts")}
         if rank != 0:
             return EXIT_STOPPED if stopped else (EXIT_WRITE if write_error else EXIT_OK)
     else:
@@ -469,7 +469,7 @@ def print_summary(s: dict[str, Any], scene) -> None:
     if s.get("ranks", 1) > 1:
         d = s["decomposition"]
         rows.append(("ranks", f"{s['ranks']} (slabs along {d['axis']}; owned {', '.join(map(str, d['owned']))}; "
-                              f"imbalance {s['imbalance']:.2f})"))
+                              f"imbalance {s['imbalance']:.2f}, {d['rebalances']} rebalances)"))
     rows += [
         ("steps", f"{s['steps']:,}"),
         ("simulated time", f"{s['sim_time']:.4g} s"),
