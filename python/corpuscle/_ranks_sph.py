@@ -68,6 +68,13 @@ def check_splittable(scene, size: int, neighbors: str | None) -> None:
     if moving:
         raise RankError("bodies: moving bodies are not split over ranks yet (docs/distributed.md); "
                         "run this scene on one rank")
+    from . import kinds as _kinds
+
+    kind = _kinds.find(scene.kind)
+    periodic = list(scene.values.get("boundary.periodic", []) or [])
+    if kind is not None and len(set(periodic)) >= kind.dim:
+        raise RankError(f"boundary.periodic = {periodic}: every axis wraps; a scene split over ranks needs an axis "
+                        "that does not (run it on one rank)")
     if neighbors not in (None, "lists", "grid"):
         raise RankError(f"--neighbors {neighbors}: a scene split over ranks runs the lists or the grid "
                         "(compact and allpairs run on one rank)")
