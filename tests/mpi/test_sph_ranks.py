@@ -44,7 +44,6 @@ elif len(sys.argv) > 6:  # the distributed path on one rank (MPI's COMM_SELF, no
     from corpuscle.scene import load_scene
     sim = ranked_simulation(load_scene(scene).with_overrides({"fluid.particles": particles, "sph.order_by_id": True}),
                             "cpu", comm, neighbors=index)
-else:
 if "sim" not in dir():
     sim = Simulation.from_scene(scene, backend="cpu", particles=particles, neighbors=index, comm=comm,
                                 overrides=extra)
@@ -123,6 +122,7 @@ def test_distributed_path_on_one_rank_and_the_grid_index(tmp_path):
     _same(one, np.load(tmp_path / "two.npz"))
 
 
+@pytest.mark.slow  # (30 s on a loaded 2-core machine)
 def test_fluid_box_3d_over_two_ranks(tmp_path):
     args = ["fluid-box", "1000", "200", "lists"]
     one = _one_process(tmp_path, args)
