@@ -49,6 +49,7 @@ FLUID_GROUP_FIELDS = ("position", "velocity", "density", "id", "velocity_prev", 
 WALL_FIELDS = {"wall_position": "position", "wall_id": "id", "wall_density": "density",
                "wall_density_prev": "density_prev", "wall_pressure": "pressure", "wall_velocity": "velocity"}
 
+WALL_WEIGHT = 0.05  # a wall particle's share of a fluid particle's work in the first cuts
 _BAD_NEIGHBORS = 2  # kBadNeighbors (scenes/sph/model.h): a list overflowed, grow and repeat
 
 
@@ -141,7 +142,10 @@ class RankedCore:
         self.migrations = 0
         # the whole scene in id order (fluid ids 0 .. nf - 1, walls nf .. n - 1)
         whole = self._whole_from_build(built.arrays) if checkpoint is None else self._whole_from_checkpoint(checkpoint)
-        self.cuts = self._balanced_cuts(whole["position"][:, self.axis])
+        # at first the fluid splits evenly (a wall particle's work is a small part of a fluid one's:
+        # it lists and sums the fluid only)
+        self.cuts = self._balanced_cuts(whole["position"][:, self.axis],
+                                        np.where(whole["id"] < self.nf, 1.0, WALL_WEIGHT))
         self._place(whole)
         if checkpoint is not None:
             self._restore_scalars(checkpoint)
