@@ -92,7 +92,7 @@ def _same(a, b):
     assert abs(float(a["ke"]) - float(b["ke"])) <= n * np.finfo(np.float32).eps * abs(float(a["ke"])) + 1e-30
 
 
-@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("ranks", [2, 3, pytest.param(4, marks=pytest.mark.slow)])
 def test_dam_break_2d_over_ranks_is_the_one_process_run(tmp_path, ranks):
     # the lists index, through the impact on the far wall (T = 3.5; 2,000 steps at 300 particles),
     # the fluid crossing the slab cuts many times: bitwise. Three ranks rebalance (run.rebalance,
