@@ -515,6 +515,53 @@ void bind_sim(nb::module_& m) {
                                       std::to_string(rec.size())).c_str());
              s.sim->unpack(slot, rec.c_str());
            }, nb::arg("slot"), nb::arg("record"), "Write a record (as pack() returns it) into slot `slot`.")
+      // one scene split over ranks (scenes/sph/ranks.h; python/corpuscle/_ranks_sph.py drives them)
+      .def("set_counts", [](PySim& s, long long fluid, long long wall, long long id_bound) {
+             s.sim->set_counts(fluid, wall, id_bound);
+           }, nb::arg("fluid"), nb::arg("wall"), nb::arg("id_bound"),
+           "A rank's slots: fluid (owned and halo), walls; ids below id_bound. Every field is then unset.")
+      .def("slots", [](PySim& s) { return s.sim->slots(); }, "Slots of the state (fluid and walls).")
+      .def("step_half", [](PySim& s, int phase, nb::bytes sums, int ranks) {
+             const size_t sz = s.sim->step_sums_size();
+             long long flags[3] = {0, 0, 0};
+             std::string buf;
+             bool ok = true;
+             if (phase == 0) {
+               buf.assign(sz, '\0');
+               s.sim->step_half(0, buf.data(), 1, flags);
+             } else if (phase == 1) {
+               if (ranks < 1 || sums.size() != sz * size_t(ranks))
+                 throw nb::value_error("step_half: phase 1 takes one step sums record a rank");
+               std::string in(sums.c_str(), sums.size());
+               s.sim->step_half(1, in.data(), ranks, flags);
+             } else if (phase == 2) {
+               ok = s.sim->step_half(2, nullptr, 0, flags);
+             } else {
+               throw nb::value_error("step_half: phase 0, 1 or 2");
+             }
+             return nb::make_tuple(nb::bytes(buf.data(), buf.size()), flags[0], flags[1], flags[2], ok);
+           }, nb::arg("phase"), nb::arg("sums") = nb::bytes("", 0), nb::arg("ranks") = 1,
+           "A step in halves: phase 0 to the reductions, phase 1 with every rank's sums (concatenated in rank "
+           "order) the finalize and the integration, phase 2 grows what overflowed in phase 0. Returns (the "
+           "rank's sums after phase 0, bad, relist, outside, ok).")
+      .def("get_slots", [](PySim& s, const std::string& name,
+                           nb::ndarray<const int, nb::ndim<1>, nb::c_contig, nb::device::cpu> slots) {
+             const FieldInfo& f = field_info(*s.sim, name);
+             const long long count = (long long)slots.shape(0);
+             std::vector<unsigned char> bytes(size_t(count) * size_t(f.components) * dtype_size(f.dtype));
+             s.sim->get_slots(name, slots.data(), count, bytes.data());
+             return owned(std::move(bytes), f, count);
+           }, nb::arg("name"), nb::arg("slots"), "A stored field's items at the slots (every slot: fluid, then walls).")
+      .def("set_slots", [](PySim& s, const std::string& name,
+                           nb::ndarray<const int, nb::ndim<1>, nb::c_contig, nb::device::cpu> slots,
+                           nb::ndarray<nb::ro, nb::c_contig, nb::device::cpu> values) {
+             const FieldInfo& f = field_info(*s.sim, name);
+             const long long count = (long long)slots.shape(0);
+             if (values.dtype() != dl(f.dtype) || values.nbytes() != size_t(count) * size_t(f.components) * dtype_size(f.dtype))
+               throw nb::value_error(("set_slots " + name + ": one item of the field's dtype a slot").c_str());
+             s.sim->set_slots(name, slots.data(), count, values.data());
+           }, nb::arg("name"), nb::arg("slots"), nb::arg("values"),
+           "Write a stored field's items at the slots (no relisting follows).")
       .def("bench", [](PySim& s, long long n) {
              SignalCheck check;
              double seconds = 0.0;

@@ -260,14 +260,12 @@ class Simulation:
         ``end_time`` are shorthands for the kind's particle key (``fluid.particles`` for the
         8-ball), ``run.seed`` and ``run.end_time``. ``neighbors`` picks the neighbour search
         (``lists``, ``grid``, ``allpairs``; the kind's first by default), ``device`` the CUDA
-        device. ``comm`` (an mpi4py communicator): the ranks the scene is split over; one
-        rank runs it as without (several: not built yet, docs/distributed.md).
+        device. ``comm`` (an mpi4py communicator): the ranks the scene is split over (the SPH
+        box kinds, docs/distributed.md; collective: every rank calls it alike); one rank runs it
+        as without.
         """
         from .scene import Scene, load_scene
 
-        if comm is not None and comm.Get_size() > 1:
-            raise ValueError(f"comm: one scene split over {comm.Get_size()} ranks is not built yet "
-                             f"(docs/distributed.md); Batch.from_scene(..., comm=) spreads many scenes over ranks")
 
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
@@ -285,6 +283,9 @@ class Simulation:
             else:
                 ovr[aliases.get(k, k.replace("__", "."))] = v
         scene = scene.with_overrides(ovr) if ovr else scene
+        if comm is not None and comm.Get_size() > 1:
+            from ._ranks_sph import ranked_simulation
+            return ranked_simulation(scene, backend, comm, neighbors=neighbors, device=device or None)
         return cls(scene, backend, neighbors=neighbors, device=device)
 
     @staticmethod

@@ -46,7 +46,7 @@ def test_bad_input_is_one_line_from_rank_zero(tmp_path):
 
 
 def test_commands_of_one_rank_refuse_several(tmp_path):
-    r = corpuscle(2, ["run", "dam-break-2d", "--backend", "serial"], tmp_path)
+    r = corpuscle(2, ["bench", "dam-break-2d", "--backend", "serial"], tmp_path)
     assert r.returncode == 2
     lines = [ln for ln in r.stderr.splitlines() if ln.startswith("corpuscle:")]
     assert len(lines) == 1 and "one rank" in lines[0] and "distributed.md" in lines[0], r.stderr
@@ -221,7 +221,7 @@ def test_vector_env_over_two_ranks_is_the_one_process_env(tmp_path):
     assert a[:, :, -2].any() or a[:, :, -1].any()  # an episode ended within the three steps
 
 
-def test_simulation_comm_of_one_rank_runs_and_of_two_is_refused(tmp_path):
+def test_simulation_comm_of_one_rank_runs_and_of_two_splits_or_is_refused(tmp_path):
     job = _script(tmp_path, """
         import sys
         from corpuscle import Simulation, _mpi
@@ -229,10 +229,12 @@ def test_simulation_comm_of_one_rank_runs_and_of_two_is_refused(tmp_path):
         one = comm.Split(comm.Get_rank(), 0)  # a communicator of this rank alone
         sim = Simulation.from_scene("dam-break-2d", backend="serial", particles=400, comm=one)
         assert sim.step(3) == 3
+        two = Simulation.from_scene("dam-break-2d", backend="serial", particles=400, comm=comm)  # split
+        assert two.step(3) == 3 and two.core.size == 2
         try:
-            Simulation.from_scene("dam-break-2d", backend="serial", particles=400, comm=comm)
+            Simulation.from_scene("magic8ball", backend="serial", particles=400, comm=comm)
         except ValueError as exc:
-            assert "not built yet" in str(exc), exc
+            assert "not split over ranks" in str(exc), exc
         else:
             sys.exit("no error")
     """)

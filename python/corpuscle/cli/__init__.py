@@ -104,7 +104,7 @@ def _main_one(args: argparse.Namespace) -> int:
 
 
 # the commands that run over several MPI ranks (docs/distributed.md); the others refuse them
-RANK_COMMANDS = ("polar", "info")
+RANK_COMMANDS = ("run", "polar", "info")
 
 
 def _main_ranks(args: argparse.Namespace) -> int:
@@ -125,8 +125,7 @@ def _main_ranks(args: argparse.Namespace) -> int:
     if args.command not in RANK_COMMANDS:
         if comm.Get_rank() == 0:
             err(f"error: `{PROG} {args.command}` runs on one rank, not {comm.Get_size()}: under mpiexec only "
-                f"{' and '.join(RANK_COMMANDS)} spread over ranks (one scene split over ranks is not built yet: "
-                f"docs/distributed.md)")
+                f"{', '.join(RANK_COMMANDS)} spread over ranks (docs/distributed.md)")
         return EXIT_USAGE
     try:
         return int(args._handler(args) or 0)

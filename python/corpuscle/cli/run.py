@@ -241,22 +241,59 @@ def _open_writer(io, plan: RunPlan, header: dict[str, Any], args: argparse.Names
 
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    # validate everything cheap first; the core is imported only after this
+class _NullSink:
+    """The frame sink of a rank other than 0 (rank 0 writes the one frame stream)."""
+
+    written = 0
+    last_step = None
+
+    def put(self, *args) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _prepare_ranks(args: argparse.Namespace, comm) -> RunPlan:
+    """`run` under mpiexec: the plan, and one line when the scene cannot be split over the ranks."""
+    from .._ranks_sph import check_splittable
+
     plan = prepare(args)
+    if getattr(args, "live", False) or getattr(args, "render", None):
+        raise UsageError(f"--live and --render run on one rank, not {comm.Get_size()}")
+    check_splittable(plan.scene, comm.Get_size(), args.neighbors)
+    return plan
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .. import _mpi
+
+    comm = _mpi.world()  # None without mpiexec: the whole scene here
+    rank = 0 if comm is None else comm.Get_rank()
+    # validate everything cheap first; the core is imported only after this (under mpiexec every
+    # rank checks the same input; a failure anywhere is reported once and stops all)
+    plan = prepare(args) if comm is None else _mpi.agree(comm, lambda: _prepare_ranks(args, comm))
     scene, out, every = plan.scene, plan.out, plan.every
     simulation = import_core_module("corpuscle.simulation")
     io = importlib.import_module("corpuscle.io")
+    if rank != 0:
+        args.json, args.no_progress = True, True  # (rank 0 reports)
 
     # initialisation (timed on its own, not part of steps/s)
     t_init = time.perf_counter()
     with interruptible_init("initialising (nothing written)"):
-        if plan.resume is None:
+        state = None if plan.resume is None else checkpoint_state(plan.resume["state"])
+        if comm is not None:
+            from .._ranks_sph import ranked_simulation
+
+            sim = ranked_simulation(scene, args.backend, comm, checkpoint=state, neighbors=args.neighbors,
+                                    device=args.device or None)
+            plan.scene = scene = sim.scene  # (with sph.order_by_id on, as the ranks run it)
+        elif plan.resume is None:
             sim = simulation.Simulation.from_scene(scene, backend=args.backend, neighbors=args.neighbors,
                                                    device=args.device)
         else:
-            sim = simulation.Simulation(scene, backend=args.backend,
-                                        checkpoint=checkpoint_state(plan.resume["state"]),
+            sim = simulation.Simulation(scene, backend=args.backend, checkpoint=state,
                                         neighbors=args.neighbors, device=args.device)
     sim.set_end_time(plan.end_time)  # the core shortens the last step to land on it
     start_steps = int(sim.steps)
@@ -268,7 +305,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     viewer = _start_viewer(args, sim, header)
     try:
         live = _live_render(args, header)
-        writer = _open_writer(io, plan, header, args)
+        writer = _open_writer(io, plan, header, args) if rank == 0 else contextlib.nullcontext()
     except BaseException:
         if viewer is not None:
             viewer.close()
@@ -296,7 +333,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         with writer:
-            sink = FrameSink(writer)  # frames are written while the next chunk steps
+            sink = FrameSink(writer) if rank == 0 else _NullSink()  # written while the next chunk steps
             try:
                 if plan.resume is None:
                     _record(sink, sim, args, live, kind_at(start_steps, False))
@@ -333,6 +370,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     if viewer is not None:
                         viewer.stepped(sim, recorded=True)
             except KeyboardInterrupt as exc:
+                if comm is not None:
+                    raise  # every rank stops (MPI_Abort): no frame that needs the others
                 interrupted = exc
                 if int(sim.steps) > last_recorded:
                     try:
@@ -400,6 +439,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     summary["wall_seconds_per_sim_second"] = _solution.wall_per_sim_second(wall, float(sim.time) - start_sim_time)
     summary.update(_solution.particle_counts(sim))
     summary.update(_solution.memory_per_particle(sim))
+    if comm is not None:
+        bal = sim.core.balance()  # (every rank: a collective)
+        summary["ranks"] = bal["ranks"]
+        summary["imbalance"] = bal["imbalance"]
+        summary["decomposition"] = {k: bal[k] for k in ("axis", "owned", "halo", "migrations", "rebalances", "cuts")}
+        if rank != 0:
+            return EXIT_STOPPED if stopped else (EXIT_WRITE if write_error else EXIT_OK)
+    else:
+        summary["ranks"] = 1
     if args.json:
         print(_json.dumps(summary))
     else:
@@ -425,6 +473,10 @@ def print_summary(s: dict[str, Any], scene) -> None:
         rows.append(("ghosts", f"{s['ghosts']:,}"))
     if s.get("resumed_at_step") is not None:
         rows.append(("resumed at step", f"{s['resumed_at_step']:,}"))
+    if s.get("ranks", 1) > 1:
+        d = s["decomposition"]
+        rows.append(("ranks", f"{s['ranks']} (slabs along {d['axis']}; owned {', '.join(map(str, d['owned']))}; "
+                              f"imbalance {s['imbalance']:.2f}, {d['rebalances']} rebalances)"))
     rows += [
         ("steps", f"{s['steps']:,}"),
         ("simulated time", f"{s['sim_time']:.4g} s"),

@@ -50,6 +50,10 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
         "run.end_time": _K("float", end_time, "s", 0.0, 1e7, "simulated time at which the run ends", lo_open=True),
         "run.seed": _K("int", 0, "", 0, INT64_MAX, "random seed (the start is a lattice: unused)"),
         "run.record_every": _K("int", record_every, "steps", 1, 10**9, "record a frame every this many steps"),
+        "run.rebalance": _K("float", 0.0, "", 0.0, 1e3,
+                            "split over MPI ranks: move the slab cuts to even out the measured work at a relisting "
+                            "when the ranks' core time (max / mean since the last balance) passes this; 0: never "
+                            "(docs/distributed.md)"),
         "fluid.particles": _K("int", 0, "", 0, 2**31 - 1,
                               "fluid particles (approximately: a lattice fills the block); 0: the kind's default "
                               "for the backend, unless fluid.spacing is set"),
@@ -89,6 +93,10 @@ def common_keys(dim: int, *, end_time: float, record_every: int, smoothing: floa
                         "--neighbors lists: threads sharing a particle's list in the CUDA pair pass, 1, 2, 4 or 8 "
                         "(their partial sums merged in a fixed order); 0: chosen by the state's size (on CUDA the "
                         "fewest, up to 8, that give 400,000 threads; the CPU backends 1)"),
+        "sph.order_by_id": _K("bool", False, "", doc="break the sort's ties within a cell by particle id, so "
+                              "every particle's neighbours are summed in an order independent of its slot (a run "
+                              "split over MPI ranks forces it on, and is then bitwise this one-process run; off: "
+                              "one sort pass fewer)"),
         "timestep.cfl": _K("float", 0.2, "", 0.0, 1.0, "CFL number of the time step (DualSPHysics: 0.2)", lo_open=True),
         "timestep.dt_min": _K("float", 1e-9, "s", 0.0, 1.0, "smallest time step", lo_open=True),
         "timestep.dt_max": _K("float", 1e-3, "s", 0.0, 1.0, "largest time step", lo_open=True),
@@ -188,6 +196,14 @@ def _check_boundaries(dim: int) -> CrossCheck:
             raise SceneError(f"flow.initial = 'taylor-green' needs a 2-D kind periodic in x and y "
                              f"(boundary.periodic = [\"x\", \"y\"]), got boundary.periodic = {_fmt_value(per)}")
     return check
+
+
+def _check_rebalance(values, arrays) -> None:
+    """run.rebalance is a ratio of the slowest rank's time to the mean: above 1 (or 0: never)."""
+    r = values["run.rebalance"]
+    if r != 0 and not r > 1.0:
+        raise SceneError(f"run.rebalance must be above 1 (the slowest rank's time over the mean) or 0 (never), "
+                         f"got {_fmt_value(r)}")
 
 
 def _check_lanes(values, arrays) -> None:
@@ -326,6 +342,8 @@ class SphBox(Kind):
             # neighbours, 3^(D-1) of them: spatial/delta_list.h)
             params["max_neighbors"] = int(math.ceil((1.3 * mean + 32 + 4 * 3 ** (D - 1)) / 32.0)) * 32
         params["lanes"] = int(v["sph.lanes"])
+        params["order_by_id"] = int(bool(v["sph.order_by_id"]))
+        params["rebalance"] = float(v["run.rebalance"])
         check_memory(self.name, target, params, key_values(scene, ("fluid.particles", "fluid.spacing")),
                      f"{nf_est + box_cells} particles")
         # the walls: every lattice point of the box widened by `layers` that is not inside it
@@ -653,6 +671,6 @@ def make_schema(name: str, description: str, keys: dict[str, KeySpec], dim: int,
                      max_in_arrays={"probes": 64,  # kMaxProbes of scenes/sph/model.h
                                     "bodies": MAX_BODIES},
                      checks=[check_le("timestep.dt_min", "timestep.dt_max"), _check_probes, _check_probe_faces,
-                             _check_lanes, *checks, _probes_inside(box), _check_boundaries(dim),
+                             _check_lanes, _check_rebalance, *checks, _probes_inside(box), _check_boundaries(dim),
                              check_bodies(box, dim)])
 

@@ -9,6 +9,7 @@
 #include <utility>
 #include <vector>
 
+#include "corpuscle/core/error.h"
 #include "corpuscle/sim/table.h"
 
 namespace cps {
@@ -102,11 +103,30 @@ class Sim {
   // copy bytes of the backend's memory (an observe() array) to the host
   virtual void copy_to_host(void* dst, const void* src, size_t bytes) = 0;
 
+  // one scene split over ranks (kinds that support it: the SPH box, scenes/sph/ranks.h; the
+  // others throw): the rank's slot counts (fluid, walls; ids below id_bound), a step in halves
+  // around its reductions (phase 0 writes the rank's sums, step_sums_size() bytes, to `sums`;
+  // phase 1 reads `ranks` of them, combines them and takes the step), and a stored field's
+  // items at a list of slots (every slot, the fluid's then the walls'). No slot changes place
+  // between a step's halves, nor between steps that do not relist. After each half `flags`
+  // holds the record's clock.bad, whether the next step relists and the particles outside
+  // the domain (kind's meaning); phase 2 grows a fixed-capacity buffer that overflowed in
+  // phase 0 (false: it cannot), after which phase 0 is run again.
+  virtual void set_counts(long long fluid, long long wall, long long id_bound) { no_ranks(); }
+  virtual size_t step_sums_size() const { no_ranks(); }
+  virtual bool step_half(int phase, void* sums, int ranks, long long* flags) { no_ranks(); }
+  virtual long long slots() const { no_ranks(); }
+  virtual void get_slots(const std::string& field, const int* slots, long long count, void* out) { no_ranks(); }
+  virtual void set_slots(const std::string& field, const int* slots, long long count, const void* in) { no_ranks(); }
+
   // seconds for n steps on the backend's clock after a synchronise; per-stage ms per step
   // (stop: as step's, asked between batches of steps; a stopped measurement is meaningless and
   // the caller discards it)
   virtual double bench(long long n, const StopCheck& stop = {}) = 0;
   virtual std::vector<std::pair<std::string, double>> profile(long long n, const StopCheck& stop = {}) = 0;
+
+ protected:
+  [[noreturn]] void no_ranks() const { throw Error(std::string(kind()) + ": a scene of this kind is not split over ranks"); }
 };
 
 }  // namespace cps

@@ -29,6 +29,11 @@ template <class P, class = void>
 struct has_batch_api : std::false_type {};
 template <class P>
 struct has_batch_api<P, std::void_t<decltype(std::declval<P&>().cache_scenes())>> : std::true_type {};
+// whether a kind's pipeline runs a scene split over ranks (set_counts, enqueue_half, get_slots, ...)
+template <class P, class = void>
+struct has_ranks_api : std::false_type {};
+template <class P>
+struct has_ranks_api<P, std::void_t<decltype(std::declval<P&>().enqueue_half(0, nullptr, 0))>> : std::true_type {};
 
 template <class Exec, class P>
 class SimImpl final : public Sim {
@@ -346,6 +351,53 @@ class SimImpl final : public Sim {
   void copy_to_host(void* dst, const void* src, size_t bytes) override {
     ex_.synchronize();
     ex_.to_host(dst, src, bytes);
+  }
+
+  void set_counts(long long fluid, long long wall, long long id_bound) override {
+    if constexpr (has_ranks_api<P>::value) {
+      if (fluid > (1LL << 30) || wall > (1LL << 30)) throw Error(std::string(P::kind) + ": counts out of range");
+      p_.set_counts(int(fluid), int(wall), id_bound);
+      ex_.reset_graphs();  // (they name the old buffers)
+    } else {
+      no_ranks();
+    }
+  }
+  size_t step_sums_size() const override {
+    if constexpr (has_ranks_api<P>::value) return P::step_sums_size();
+    else no_ranks();
+  }
+  // phase 0: prepare and the step to its reductions; phase 1: the rest, then the parity
+  // advances (eagerly: no graphs, the host reads and writes between the halves)
+  bool step_half(int phase, void* sums, int ranks, long long* flags) override {
+    if constexpr (has_ranks_api<P>::value) {
+      if (phase == 2) return recover();
+      flush_control();
+      if (phase == 0) p_.prepare();
+      ex_.launch_step(-1, [&] { p_.enqueue_half(phase, sums, ranks); });
+      if (phase == 1) p_.advance(true);
+      ex_.synchronize();
+      rec_valid_ = false;
+      p_.rank_flags(records()[0], flags);
+      return true;
+    } else {
+      no_ranks();
+    }
+  }
+  long long slots() const override {
+    if constexpr (has_ranks_api<P>::value) return p_.slots();
+    else no_ranks();
+  }
+  void get_slots(const std::string& field, const int* slots, long long count, void* out) override {
+    if constexpr (has_ranks_api<P>::value) p_.get_slots(field, slots, count, out);
+    else no_ranks();
+  }
+  void set_slots(const std::string& field, const int* slots, long long count, const void* in) override {
+    if constexpr (has_ranks_api<P>::value) {
+      p_.set_slots(field, slots, count, in);
+      ex_.synchronize();
+    } else {
+      no_ranks();
+    }
   }
 
   double bench(long long n, const StopCheck& stop) override {

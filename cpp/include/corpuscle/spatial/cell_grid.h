@@ -403,9 +403,24 @@ struct CellKeysFn {
   const int* tags;  // null: every slot has tag 0
   K* keys;
   int* ids;
+  const int* perm = nullptr;  // the id tie-break's first pass: key k is slot perm[k]'s (null: slot k)
+  CPS_HD void operator()(int k) const {
+    const int i = perm ? perm[k] : k;
+    keys[k] = K(spec.key(pos[i], tags ? tags[i] : 0));
+    ids[k] = i;
+  }
+};
+
+// the id tie-break's first pass: slots keyed by their particle's id (a slot that keeps its
+// place, when *rebuild is 0: by the slot itself, so the order stands)
+struct IdKeysFn {
+  const int* id;
+  const int* rebuild;  // null: always by id
+  uint32_t* keys;
+  int* slots;
   CPS_HD void operator()(int i) const {
-    keys[i] = K(spec.key(pos[i], tags ? tags[i] : 0));
-    ids[i] = i;
+    keys[i] = uint32_t(rebuild && *rebuild == 0 ? i : id[i]);
+    slots[i] = i;
   }
 };
 
@@ -421,9 +436,11 @@ struct CellKeysIfFn {
   const int* rebuild;
   K* keys;
   int* ids;
-  CPS_HD void operator()(int i) const {
-    keys[i] = *rebuild ? K(spec.key(pos[i], tags ? tags[i] : 0)) : last[i];
-    ids[i] = i;
+  const int* perm = nullptr;  // as CellKeysFn's
+  CPS_HD void operator()(int k) const {
+    const int i = perm ? perm[k] : k;
+    keys[k] = *rebuild ? K(spec.key(pos[i], tags ? tags[i] : 0)) : last[k];
+    ids[k] = i;
   }
 };
 
@@ -465,37 +482,44 @@ class CellGrid {
 
   // 1. key slot i from pos[i] and tags[i] (null: tag 0; a tag outside [0, ntags): an unused
   //    slot), then stable-sort the keys
-  void sort(Exec& ex, const Vec<D>* pos, const int* tags, int n) {
+  //    (ids: ties within a cell broken by ids[i], a particle's id below 2^id_bits, so the sorted
+  //    order is (tag, cell, id) whatever order the slots came in: two stable sorts, by id and
+  //    then by cell; null: ties keep the slots' order)
+  void sort(Exec& ex, const Vec<D>* pos, const int* tags, int n, const int* ids = nullptr, int id_bits = 32) {
     n_ = n;
     grow(ex, ids_, n);
     grow(ex, order_, n);
+    const int* perm = ids ? by_id(ex, ids, nullptr, n, id_bits) : nullptr;
     if (spec_.narrow()) {
       grow(ex, keys32_, n);
       grow(ex, keys32_sorted_, n);
-      ex.for_each(n, CellKeysFn<D, uint32_t>{spec_, pos, tags, keys32_.data(), ids_.data()});
+      ex.for_each(n, CellKeysFn<D, uint32_t>{spec_, pos, tags, keys32_.data(), ids_.data(), perm});
       ex.sort_pairs(keys32_.data(), keys32_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
     } else {
       grow(ex, keys_, n);
       grow(ex, keys_sorted_, n);
-      ex.for_each(n, CellKeysFn<D, uint64_t>{spec_, pos, tags, keys_.data(), ids_.data()});
+      ex.for_each(n, CellKeysFn<D, uint64_t>{spec_, pos, tags, keys_.data(), ids_.data(), perm});
       ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
     }
     sorted_ = true;
   }
   // 1'. the same when *rebuild != 0 (read on the device); otherwise every slot keeps its last
   //     sorted key and the order stands (order() is the identity). The first sort always keys.
-  void sort_if(Exec& ex, const Vec<D>* pos, const int* tags, int n, const int* rebuild) {
+  //     (ids, id_bits: the tie-break of sort)
+  void sort_if(Exec& ex, const Vec<D>* pos, const int* tags, int n, const int* rebuild, const int* ids = nullptr,
+               int id_bits = 32) {
     if (!sorted_ || n != n_) {
-      sort(ex, pos, tags, n);
+      sort(ex, pos, tags, n, ids, id_bits);
       return;
     }
+    const int* perm = ids ? by_id(ex, ids, rebuild, n, id_bits) : nullptr;
     if (spec_.narrow()) {
       ex.for_each(n, CellKeysIfFn<D, uint32_t>{spec_, pos, tags, keys32_sorted_.data(), rebuild, keys32_.data(),
-                                               ids_.data()});
+                                               ids_.data(), perm});
       ex.sort_pairs(keys32_.data(), keys32_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
     } else {
       ex.for_each(n, CellKeysIfFn<D, uint64_t>{spec_, pos, tags, keys_sorted_.data(), rebuild, keys_.data(),
-                                               ids_.data()});
+                                               ids_.data(), perm});
       ex.sort_pairs(keys_.data(), keys_sorted_.data(), ids_.data(), order_.data(), n, spec_.key_bits);
     }
   }
@@ -563,6 +587,19 @@ class CellGrid {
   uint64_t table_entries() const { return spec_.table_size(); }
 
  private:
+  // the slots in the order of their ids (a slot that keeps its place when *rebuild is 0: the
+  // identity), the first pass of the id tie-break
+  const int* by_id(Exec& ex, const int* ids, const int* rebuild, int n, int id_bits) {
+    grow(ex, id_keys_, n);
+    grow(ex, id_keys_sorted_, n);
+    grow(ex, id_slots_, n);
+    grow(ex, id_perm_, n);
+    int bits = id_bits;
+    while ((int64_t(1) << bits) < int64_t(n) && bits < 32) ++bits;  // (a kept slot is keyed by its index)
+    ex.for_each(n, IdKeysFn{ids, rebuild, id_keys_.data(), id_slots_.data()});
+    ex.sort_pairs(id_keys_.data(), id_keys_sorted_.data(), id_slots_.data(), id_perm_.data(), n, bits > 32 ? 32 : bits);
+    return id_perm_.data();
+  }
   template <class T>
   static void grow(Exec& ex, Buffer<T>& b, int n) {
     if (b.size() < size_t(n) || b.size() == 0) ex.resize(b, size_t(n > 0 ? n : 1));
@@ -574,6 +611,8 @@ class CellGrid {
   Buffer<uint64_t> keys_, keys_sorted_;      // 64-bit keys ...
   Buffer<uint32_t> keys32_, keys32_sorted_;  // ... or 32-bit ones (spec_.narrow())
   Buffer<int> ids_, order_;
+  Buffer<uint32_t> id_keys_, id_keys_sorted_;  // the id tie-break's first pass
+  Buffer<int> id_slots_, id_perm_;
   Buffer<Vec<D>> sorted_pos_;
   Buffer<uint32_t> start_, end_;
 };

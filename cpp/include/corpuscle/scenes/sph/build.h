@@ -153,6 +153,7 @@ inline Model<KindT::D> build_model(const ParamSource& p) {
   if (m.lanes != 0 && m.lanes != 1 && m.lanes != 2 && m.lanes != 4 && m.lanes != 8)
     throw Error(std::string(kind) + ": lanes must be 0 (automatic), 1, 2, 4 or 8, got " + std::to_string(p.integer("lanes")));
   m.fixed_terms = p.has("fixed_terms") ? int(p.integer("fixed_terms")) : 1;
+  m.order_by_id = p.has("order_by_id") ? int(p.integer("order_by_id")) : 0;
   // moving bodies (bodies.h): per body kind, row0, rows, c0 (3), a0 (3, degrees), velocity (3),
   // angular velocity (3, rad/s)
   m.n_moving = p.has("n_moving") ? int(p.integer("n_moving")) : 0;

@@ -105,6 +105,12 @@ struct Model {
   // and backend); 0: always dispatched at run time (the same functions: on the CPU the same
   // sums bit for bit, on CUDA up to the compiler's contractions, which tests check)
   int fixed_terms;
+  // ties within a cell of the sort broken by the particle's id (`sph.order_by_id`; always on
+  // in a scene split over ranks): every particle's neighbours are then walked in an order that
+  // does not depend on how the particles came to their slots, so a run split over ranks is
+  // bitwise the run of one process with the key on (scenes/sph/ranks.h). 0: ties keep the
+  // slots' last order (the default: one sort pass fewer)
+  int order_by_id;
   // moving bodies (scenes/sph/bodies.h): their prescribed motions; the wall particles of each
   // follow its pose (the motion tables in the pipeline's buffer)
   int n_moving;

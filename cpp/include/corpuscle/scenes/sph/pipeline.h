@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "corpuscle/core/error.h"
+#include "corpuscle/scenes/sph/ranks.h"
 #include "corpuscle/scenes/sph/stages.h"
 #include "corpuscle/scenes/sph/tables.h"
 #include "corpuscle/spatial/allpairs.h"
@@ -162,20 +163,11 @@ class Pipeline {
       throw Error(std::string(kind) + ": lanes must be 1, 2, 4 or 8 (0: automatic), got " + std::to_string(m_.lanes));
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(ModelT));
-    fields_.resize(size_t(n_));
-    rec_.resize(n_);
-    if constexpr (D == 2) pr_.resize(n_);  // (3-D: rho_j rides in the record's position)
-    if constexpr (kLists) {
+    if constexpr (kLists)
       if (!(m.list_radius >= m.h) || !(m.rebuild_disp2 >= 0.0f) || m.max_neighbors < 1)
         throw Error(std::string(kind) + ": lists need list_radius >= h, rebuild_distance >= 0 and max_neighbors >= 1");
-      x_build_.resize(n_);
-      reserve_lists();
-    }
-    items_.resize(n_);
-    tags_.resize(n_);
-    std::vector<int> tags(n_);
-    for (int i = 0; i < n_; ++i) tags[i] = i < nf_ ? kTagFluid : kTagWall;
-    ex_.to_device(tags_.data(), tags.data(), n_ * sizeof(int));
+    id_bound_ = n_;
+    resize_slots();
     std::vector<int> ids(n_);
     for (int i = 0; i < n_; ++i) ids[i] = i;
     ex_.to_device(fields_.id.cur(0), ids.data(), n_ * sizeof(int));
@@ -202,6 +194,53 @@ class Pipeline {
   }
 
   long long particles() const { return nf_; }  // the fluid (the walls: n_wall in derived())
+
+  // ---- a scene split over ranks (scenes/sph/ranks.h; driven by corpuscle/_ranks_sph.py) ----
+  // the rank's slots: nf fluid (owned and halo), nw walls (owned and halo), ids below id_bound
+  // (the whole scene's); every field's values are undefined until set_slots writes them
+  void set_counts(int nf, int nw, long long id_bound) {
+    if (nf < 0 || nw < 0) throw Error(std::string(kind) + ": negative particle counts");
+    if (m_.n_moving > 0) throw Error(std::string(kind) + ": moving bodies are not split over ranks");
+    nf_ = nf;
+    n_ = nf + nw;
+    m_.n_fluid = nf;
+    m_.n_wall = nw;
+    ex_.to_device(model_.data(), &m_, sizeof(ModelT));
+    id_bound_ = id_bound;
+    resize_slots();
+    relist_ = true;
+  }
+  // a step in halves: phase 0 the step up to its reductions (the rank's sums written to `sums`,
+  // a StepSums), phase 1 (`sums`: the ranks' StepSums, `ranks` of them, combined here in rank
+  // order with StepSums::combine, the same on every rank) the finalize, the probes' series and
+  // the integration. The caller advances the parity after phase 1 (SimImpl::step_half).
+  void enqueue_half(int phase, void* sums, int ranks) {
+    if (phase == 0) {
+      front();
+      ex_.reduce(arrays(parity_ ^ 1, parity_).items, n_, &g_->pending, SumsOp{}, StepSums::identity());
+      ex_.mark(3);
+      ex_.to_host(sums, &g_->pending, sizeof(StepSums));
+    } else {
+      const StepSums all = combine_rank_sums(static_cast<const StepSums*>(sums), ranks);
+      ex_.to_device(&g_->pending, &all, sizeof(StepSums));
+      ex_.single(FinalizeStage<D>{model_.data(), g_, kLists});
+      back();
+    }
+  }
+  static size_t step_sums_size() { return sizeof(StepSums); }
+  static void rank_flags(const Scene& r, long long* flags) {
+    flags[0] = r.clock.bad;
+    flags[1] = r.rebuild;
+    flags[2] = r.outside;
+  }
+  // the items of a stored field (every slot: fluid then walls) at `slots` to the host / from it
+  void get_slots(const std::string& name, const int* slots, long long count, void* out) {
+    slot_copy(name, slots, count, out, false);
+  }
+  void set_slots(const std::string& name, const int* slots, long long count, const void* in) {
+    slot_copy(name, slots, count, const_cast<void*>(in), true);
+  }
+  long long slots() const { return n_; }
   int scenes() const { return 1; }
 
   // `lists`: a list that overflowed stopped the step before it was taken (kBadNeighbors); the
@@ -305,9 +344,25 @@ class Pipeline {
   void invalidate(bool) { relist_ = true; }
 
   void enqueue(bool integrate) {
+    front();
+    if (integrate) {
+      // 4. the reductions and the per-scene update
+      ex_.reduce_then(arrays(parity_ ^ 1, parity_).items, n_, &g_->pending, SumsOp{}, StepSums::identity(),
+                      FinalizeStage<D>{model_.data(), g_, kLists});
+      back();
+    } else {
+      ex_.reduce(arrays(parity_ ^ 1, parity_).items, n_, &g_->sums, SumsOp{}, StepSums::identity());
+      ex_.mark(3);
+    }
+  }
+
+ private:
+  // the step up to its reductions: 1. sort, reorder, mark, lists; 2. the pair pass; 3. probes
+  void front() {
     const int cur = parity_, nxt = parity_ ^ 1;
     ModelT* md = model_.data();
     Scene* g = g_;
+    const int* ids = m_.order_by_id ? fields_.id.cur(cur) : nullptr;  // (the tie-break by id)
     // 1. key and sort (fluid tag 0, walls tag 1), gather into cell order, mark, chunk
     //    (lists: the key, sort and mark run only on the steps that relist, as a conditional part
     //    of the step (Exec::run_if: on CUDA a conditional node of the captured graph, skipped
@@ -316,12 +371,12 @@ class Pipeline {
     //    takes slot j from slot j. The lists are built on the steps that relist only.)
     if constexpr (kLists) {
       ex_.run_if(&g->rebuild, [&] {
-        grid_.sort_if(ex_, fields_.position.cur(cur), tags_.data(), n_, &g->rebuild);
+        grid_.sort_if(ex_, fields_.position.cur(cur), tags_.data(), n_, &g->rebuild, ids, id_bits());
         grid_.mark(ex_);
       });
       ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), &g->rebuild});
     } else {
-      grid_.sort(ex_, fields_.position.cur(cur), tags_.data(), n_);
+      grid_.sort(ex_, fields_.position.cur(cur), tags_.data(), n_, ids, id_bits());
       ex_.for_each(n_, ReorderStage<D>{md, grid_.order(), arrays(cur, nxt), nullptr});
       grid_.mark(ex_);
     }
@@ -349,24 +404,25 @@ class Pipeline {
     // the free bodies' force and torque of this state (bodies.h)
     if (m_.n_free > 0) body_forces(s);
     ex_.mark(2);
-    if (integrate) {
-      // 4. the reductions and the per-scene update
-      ex_.reduce_then(s.items, n_, &g->pending, SumsOp{}, StepSums::identity(), FinalizeStage<D>{md, g, kLists});
-      // the probes' series: a taken step appends each due probe's reading (probe.h)
-      if (m_.n_probes > 0) ex_.for_each(1, ProbeSeriesStage<D>{md, g});
-      ex_.mark(3);
-      // 5. integrate in place (the sorted buffers become the current ones)
-      ex_.for_each(n_, IntegrateStage<D>{md, g, s, nf_});
-      // the free bodies' step (their force and torque of this state, the step's dt)
-      if (m_.n_free > 0) ex_.single(FreeBodyStage<D>{md, g, u_});
-      // the moving bodies' particles at the pose of the new time (bodies.h)
-      if (m_.n_moving > 0) place_bodies(s);
-      ex_.mark(4);
-    } else {
-      ex_.reduce(s.items, n_, &g->sums, SumsOp{}, StepSums::identity());
-      ex_.mark(3);
-    }
   }
+  // after the finalize: the probes' series, 5. the integration, the moving bodies
+  void back() {
+    ModelT* md = model_.data();
+    Scene* g = g_;
+    Arrays<D> s = arrays(parity_ ^ 1, parity_);
+    // the probes' series: a taken step appends each due probe's reading (probe.h)
+    if (m_.n_probes > 0) ex_.for_each(1, ProbeSeriesStage<D>{md, g});
+    ex_.mark(3);
+    // 5. integrate in place (the sorted buffers become the current ones)
+    ex_.for_each(n_, IntegrateStage<D>{md, g, s, nf_});
+    // the free bodies' step (their force and torque of this state, the step's dt)
+    if (m_.n_free > 0) ex_.single(FreeBodyStage<D>{md, g, u_});
+    // the moving bodies' particles at the pose of the new time (bodies.h)
+    if (m_.n_moving > 0) place_bodies(s);
+    ex_.mark(4);
+  }
+
+ public:
 
   std::pair<void*, long long> view(const std::string& name, const Scene&) {
     const int nf = nf_, nw = n_ - nf_;
@@ -460,6 +516,54 @@ class Pipeline {
   }
 
  private:
+  // every per-slot buffer sized to n_ (the halo flags zero: every slot the rank's own), the tags
+  void resize_slots() {
+    fields_.resize(size_t(n_));
+    ex_.zero(fields_.halo.cur(0), size_t(n_) * sizeof(int));
+    ex_.zero(fields_.halo.cur(1), size_t(n_) * sizeof(int));
+    rec_.resize(n_);
+    if constexpr (D == 2) pr_.resize(n_);  // (3-D: rho_j rides in the record's position)
+    if constexpr (kLists) {
+      x_build_.resize(n_);
+      reserve_lists();
+    }
+    items_.resize(n_);
+    tags_.resize(n_);
+    std::vector<int> tags(n_);
+    for (int i = 0; i < n_; ++i) tags[i] = i < nf_ ? kTagFluid : kTagWall;
+    if (n_ > 0) ex_.to_device(tags_.data(), tags.data(), n_ * sizeof(int));
+  }
+  // bits of the largest id (the tie-break's first sort)
+  int id_bits() const {
+    int b = 1;
+    while ((1LL << b) < id_bound_) ++b;
+    return b;
+  }
+  // a stored field's items at slots to the host (or back): through a staging buffer on the backend
+  void slot_copy(const std::string& name, const int* slots, long long count, void* host, bool to_slots) {
+    if (count <= 0) return;
+    for (long long k = 0; k < count; ++k)
+      if (slots[k] < 0 || slots[k] >= n_) throw Error(std::string(kind) + ": slot " + std::to_string(slots[k]) + " out of range");
+    void* base = nullptr;
+    size_t words = 0;
+#define CPS_SPH_SLOT_FIELD_(fname, T, comps, group, ckpt, settable, recorded, moves) \
+    if (name == #fname) { base = fields_.fname.cur(parity_); words = sizeof(CPS_FS_ITEM_(T, comps)) / 4; }
+    CPS_SPH_FIELDS(CPS_SPH_SLOT_FIELD_)
+#undef CPS_SPH_SLOT_FIELD_
+    if (!base) throw Error(std::string(kind) + ": no stored field '" + name + "'");
+    if (slot_idx_.size() < size_t(count)) slot_idx_.resize(size_t(count));
+    if (slot_buf_.size() < size_t(count) * words) slot_buf_.resize(size_t(count) * words);
+    ex_.to_device(slot_idx_.data(), slots, size_t(count) * sizeof(int));
+    uint32_t* field = static_cast<uint32_t*>(base);
+    if (to_slots) {
+      ex_.to_device(slot_buf_.data(), host, size_t(count) * words * 4);
+      ex_.for_each(int(count), SlotWordsStage{slot_idx_.data(), int(words), field, slot_buf_.data(), true});
+    } else {
+      ex_.for_each(int(count), SlotWordsStage{slot_idx_.data(), int(words), field, slot_buf_.data(), false});
+      ex_.synchronize();
+      ex_.to_host(host, slot_buf_.data(), size_t(count) * words * 4);
+    }
+  }
   bool fixed_terms() const {
     return m_.fixed_terms && DefaultTerms::matches(m_);
   }
@@ -581,6 +685,9 @@ class Pipeline {
   Buf<int> wall_free_;    // per wall particle: 1 for a free body's (the pair stage's flag)
   Buf<BodyItem> body_items_;  // per wall particle: its share of its free body's force and torque
   Buf<int> tags_;
+  Buf<int> slot_idx_;        // get_slots / set_slots: the slots, and their items' words
+  Buf<uint32_t> slot_buf_;
+  long long id_bound_ = 0;   // ids lie below it (the tie-break's bits)
   int nf_ = 0, n_ = 0;
   int parity_ = 0;
 };

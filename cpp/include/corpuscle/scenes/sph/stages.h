@@ -265,7 +265,9 @@ struct InteractStage {
       if (!finite(s.drho + (s.free_i ? norm2(s.acc) : 0.0f))) it.bad = 1;
     }
     a.density_rate[i] = s.drho;
-    a.items[i] = it;
+    // a halo slot (a copy of another rank's particle: scenes/sph/ranks.h) adds nothing to the
+    // step's reductions: its owner counts it
+    a.items[i] = a.halo[i] ? StepSums::identity() : it;
   }
 };
 
@@ -529,6 +531,7 @@ struct IntegrateStage {
   CPS_HD void operator()(int i) const {
     const float dt = g->step_dt;
     if (!(dt > 0.0f)) return;  // a step not taken leaves the particles as they are
+    if (a.halo[i]) return;     // a halo slot is its owner's to move (scenes/sph/ranks.h)
     const Model<D>& m = *model;
     // the step counter is already this step's (finalize advanced it): steps 1, 1 + N, ... are Euler
     const bool euler = m.integrator == kSymplecticEuler || (g->clock.step - 1) % m.verlet_steps == 0;

@@ -17,7 +17,8 @@
   X(pressure, float, 1, "fluid", false, false, true, false)          \
   X(acceleration, float, D, "fluid", false, false, false, false)     \
   X(density_rate, float, 1, "fluid", false, false, false, false)     \
-  X(shift_grad, float, D, "fluid", false, false, false, false)
+  X(shift_grad, float, D, "fluid", false, false, false, false)     \
+  X(halo, int, 1, "fluid", false, true, false, true)
 
 // the wall particles' views of those buffers (slots [nf, nf + nw)), and the fluid's transport-
 // velocity difference v~ - v (`sph.transport_velocity`: buffers of its own, allocated only when
