@@ -86,12 +86,12 @@ def _random_quaternions(rng: np.random.Generator, k: int) -> np.ndarray:
 PATHS = {"auto": -1, "general": 0, "chip": 1, "chip-emulated": 2}
 
 
-def core_path(path: str, backend: str) -> int:
+def core_path(path: str, backend: str, key: str = "path") -> int:
     """The core's code of a step path, checked against the backend (a one-line ValueError)."""
     if path not in PATHS:
-        raise ValueError(f"path must be one of auto, general, chip, got {path!r}")
+        raise ValueError(f"{key} must be one of auto, general, chip, got {path!r}")
     if path == "chip" and backend != "cuda":
-        raise ValueError(f"path = chip runs on the cuda backend, got backend {backend!r} (use path = general or auto)")
+        raise ValueError(f"{key} = chip runs on the cuda backend, got backend {backend!r} (use general or auto)")
     return PATHS[path]
 
 
@@ -133,7 +133,7 @@ class Batch:
     def from_scene(cls, scene="magic8ball", n: int = 1, backend: str = "auto",
                    overrides: dict[str, Any] | None = None, neighbors: str | None = None, device: int | None = None,
                    settle: float = 1.0, randomize: bool = True, placement: str = "rotated",
-                   comm=None, path: str = "auto", **kwargs) -> "Batch":
+                   comm=None, path: str | None = None, **kwargs) -> "Batch":
         """n scenes of one scene file (a built-in name, a TOML path or a Scene), with
         overrides as :meth:`corpuscle.Simulation.from_scene` takes them (dotted keys or
         ``__`` for the dot; ``particles``, ``seed``, ``end_time``). The keys of
@@ -155,8 +155,9 @@ class Batch:
         ``path``: how the device steps the scenes: ``"chip"`` (a block per scene, the scene in
         the multiprocessor's shared memory, many steps a launch: docs/magic8ball.md),
         ``"general"`` (the engine's stages over global memory), or ``"auto"`` (chip where the
-        scenes fit on the cuda backend, else general). ``"chip"`` on a CPU backend, or where
-        a scene does not fit, is a ``ValueError``. :attr:`path` says which runs.
+        scenes fit on the cuda backend, else general); None: the scene's ``sph.path``.
+        ``"chip"`` on a CPU backend, or where a scene does not fit, is a ``ValueError``.
+        :attr:`path` says which runs.
 
         ``comm`` (an mpi4py communicator, e.g. ``MPI.COMM_WORLD``; docs/distributed.md): the n
         scenes are spread over its ranks in contiguous blocks, rank r holding scenes
@@ -179,7 +180,7 @@ class Batch:
                                                    randomize, placement, comm, path, **kwargs))
 
     @classmethod
-    def _build(cls, scene, n, backend, overrides, neighbors, device, settle, randomize, placement, comm, path="auto",
+    def _build(cls, scene, n, backend, overrides, neighbors, device, settle, randomize, placement, comm, path=None,
                **kwargs) -> "Batch":
         from .scene import Scene, load_scene
 
@@ -212,7 +213,7 @@ class Batch:
             raise ValueError(f"n = {n_loc} scenes{' on a rank' if comm is not None else ''} of fluid.particles = {n_most}: {n_loc * n_most:,} particle slots, "
                              f"at most {MAX_SLOTS:,}")
         self.backend = resolve_backend(backend)
-        path_code = core_path(path, self.backend)
+        path_code = None if path is None else core_path(path, self.backend)
         self.device = _count("device", device)
         have, where = _kinds.memory_available(Target(self.backend, "lists", self.device))
         if have is not None and n_loc * n_most * MIN_SLOT_BYTES > have:
@@ -263,7 +264,8 @@ class Batch:
         params = dict(ref.params)
         params["n_fluid"] = n_max
         params["n_scenes"] = n_loc
-        params["path"] = path_code
+        if path_code is not None:
+            params["path"] = path_code
         # per-scene parameters
         side = cols["die.side"].astype(np.float64)
         radius = float(v["container.radius"])
