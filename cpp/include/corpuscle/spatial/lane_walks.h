@@ -69,21 +69,18 @@ CPS_HD int for_each_listed_compacting(const SingleLane&, const int* list, int co
   return kept;
 }
 
-// visit every slot of g's tags within sqrt(r2max) of xi in the cells around xc (those that
-// may hold a slot within sqrt(g.r2) of xc), cell by cell in CellGridView's walk order (tags,
-// then z, y, x, then slots), and list them (up to cap); returns how many there were. With
-// xc = xi and r2max = g.r2 the walk of the cells around a point (for_each_in_cells); with
-// xc a particle's position when the cells were binned and r2max its reach now, the walk of
-// the cells of a past build (the 8-ball's chip path: scenes/magic8ball/chip.h)
+// visit every slot of g's tags within sqrt(g.r2) of xi, cell by cell in CellGridView's walk
+// order (tags, then z, y, x, then slots), and list them (up to cap); returns how many there
+// were
 template <int D, class Visitor>
-CPS_HD int for_each_in_cells_from(const SingleLane&, const CellGridView<D>& g, const Vec<D>& xc, const Vec<D>& xi,
-                                  float r2max, Visitor& visit, int* list, int cap) {
+CPS_HD int for_each_in_cells(const SingleLane&, const CellGridView<D>& g, const Vec<D>& xi, Visitor& visit, int* list,
+                             int cap) {
   int count = 0;
-  g.for_each_cell_range(0, xc, [&](uint32_t s, uint32_t e) {
+  g.for_each_cell_range(0, xi, [&](uint32_t s, uint32_t e) {
     for (uint32_t j = s; j < e; ++j) {
       Vec<D> d = xi - g.pos[j];
       float r2 = norm2(d);
-      if (r2 < r2max) {
+      if (r2 < g.r2) {
         if (count < cap) list[count] = int(j);
         ++count;
         visit(int(j), d, r2);
@@ -91,13 +88,6 @@ CPS_HD int for_each_in_cells_from(const SingleLane&, const CellGridView<D>& g, c
     }
   });
   return count;
-}
-// visit every slot of g's tags within sqrt(g.r2) of xi, cell by cell in CellGridView's walk
-// order, and list them (up to cap); returns how many there were
-template <int D, class Visitor>
-CPS_HD int for_each_in_cells(const SingleLane& L, const CellGridView<D>& g, const Vec<D>& xi, Visitor& visit, int* list,
-                             int cap) {
-  return for_each_in_cells_from(L, g, xi, xi, g.r2, visit, list, cap);
 }
 
 #ifdef __CUDACC__
@@ -197,12 +187,12 @@ __device__ void block_range(const CellGridView<D>& g, const int* c, int k, int n
 // W-th candidate of a cell; hits are listed in the serial walk's order by a ballot (the cells
 // the serial walk culls hold no slot within reach: the same hits, in the same order)
 template <int W, int D, class Visitor>
-__device__ int for_each_in_cells_from(const SubWarpLanes<W>& L, const CellGridView<D>& g, const Vec<D>& xc,
-                                      const Vec<D>& xi, float r2max, Visitor& visit, int* list, int cap) {
+__device__ int for_each_in_cells(const SubWarpLanes<W>& L, const CellGridView<D>& g, const Vec<D>& xi, Visitor& visit,
+                                 int* list, int cap) {
   constexpr int kBlock = D == 3 ? 27 : 9;
   const int nslots = kBlock * (g.tag_end - g.tag_begin);
   int c[D];
-  g.spec.cell_of(xc, c);
+  g.spec.cell_of(xi, c);
   const unsigned below = (1u << L.lane()) - 1u;
   int count = 0;
   for (int k0 = 0; k0 < nslots; k0 += W) {
@@ -219,7 +209,7 @@ __device__ int for_each_in_cells_from(const SubWarpLanes<W>& L, const CellGridVi
         if (j < e) {
           d = xi - g.pos[j];
           r2 = norm2(d);
-          hit = r2 < r2max;
+          hit = r2 < g.r2;
         }
         const unsigned m = L.group_ballot(hit);
         if (hit) {
@@ -232,11 +222,6 @@ __device__ int for_each_in_cells_from(const SubWarpLanes<W>& L, const CellGridVi
     }
   }
   return count;
-}
-template <int W, int D, class Visitor>
-__device__ int for_each_in_cells(const SubWarpLanes<W>& L, const CellGridView<D>& g, const Vec<D>& xi, Visitor& visit,
-                                 int* list, int cap) {
-  return for_each_in_cells_from(L, g, xi, xi, g.r2, visit, list, cap);
 }
 #endif
 

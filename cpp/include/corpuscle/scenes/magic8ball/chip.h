@@ -2,29 +2,30 @@
 // cell table, record and reductions in the block's shared memory, K steps per launch.
 //
 // The physics is the general path's (stages.h: density_of, tait_pressure, ForceVisitor,
-// particle_forces, FinalizeStage, integrate_particle; the walk of spatial/lane_walks.h); only
-// where the data live and how the loops run differ. A step on chip is the lists index's step
-// with the lists replaced by the cells of the last rebuild:
+// particle_forces, FinalizeStage, integrate_particle; the walks of spatial/lane_walks.h and
+// the lists of spatial/neighbor_list.h); only where the data live and how the loops run
+// differ. A step on chip is the lists index's step:
 //
 //   - rebuilding(m, scene) (a new state, or the scene moved by more than its skin since the
 //     last rebuild, moved_too_far): the scene's fluid and ghost entries are keyed by cell and
 //     sorted in shared memory (a bitonic sort of (layer, cell key, entry) words: the entry
 //     below the key keeps it stable, so the order is the general path's stable radix sort's),
-//     gathered into that order, the ghosts made, x_build set and the cell table marked;
-//   - every step: particle i walks the 3^3 cells around its position at the last rebuild
-//     (x_build: the cells were binned then) and visits the slots within h of its position
-//     now. A pair within h now was within h (1 + skin) at the rebuild (moved_too_far's
-//     bound), so it lies in those cells: the same neighbours as the lists hold, in the same
-//     order (the lists are that walk's hits).
+//     gathered into that order, the ghosts made, x_build set, the cell table marked, and
+//     every particle's list of neighbours within h (1 + skin) made by the cell walk;
+//   - every step: the density walks the list and keeps the entries within h (the near list),
+//     the forces walk the near list.
+// The lists are the only arrays outside shared memory (the pipeline's list buffers, the
+// scene's rows, holding slots of the scene's block): a particle's candidates are tested once
+// per rebuild, not every step (a cell walk tests about ten candidates per neighbour within h).
 //
 // The reductions of a step are summed per lane group in a fixed order, then the groups in
 // order by one thread: deterministic, though not the general path's order (float sums agree
 // to rounding). The control is read once per step (it does not change within a launch: the
 // host writes it between launches), the end time and the halting flags exactly as in the
-// general path's FinalizeStage. At a launch's start the order, x_build and ghosts are the
-// state's (either path leaves them consistent); a scene that does not rebuild then marks its
-// cells from x_build. At its end the state is written to the other buffers (the pipeline's
-// parity flips as after a general step).
+// general path's FinalizeStage. At a launch's start the order, x_build, ghosts and lists are
+// the state's (the general path's lists hold other slot numbers: a state it stepped last is
+// relisted, the pipeline raises every scene's rebuild). At its end the state is written to
+// the other buffers (the pipeline's parity flips as after a general step).
 //
 // On the CPU the tile runs its lanes one after another (CpuTile): the same code, which the
 // tests use to check the chip path's logic against the general path without a device.
@@ -190,8 +191,11 @@ struct ChipStage {
     grid.cell_start = S.cstart;
     grid.cell_end = S.cend;
     grid.n = 2 * n;
-    grid.r2 = m.list_radius * m.list_radius;  // the cells' reach (culling about x_build)
+    grid.r2 = m.list_radius * m.list_radius;  // the lists' reach
     grid.tag_end = 2;
+    // the scene's rows of the lists (entries: slots of this block)
+    const RowLists lists{a.nbr + size_t(base) * size_t(m.max_neighbors), a.nbr_count + base, m.max_neighbors};
+    const RowLists near{a.near + size_t(base) * size_t(m.max_near), a.near_count + base, m.max_near};
     for (int k = 0; k < steps; ++k) {
       if (halted(S.rec)) {  // (uniform: every lane reads the record after a barrier)
         t.lanes([&](int l) {
@@ -200,9 +204,10 @@ struct ChipStage {
         t.sync();
         break;
       }
-      if (rebuilding(m, S.rec)) rebuild(t, S, L, n_active);
-      else if (k == 0) mark_from_build(t, S, L, n_active);
-      // density and pressure (and the container frame of this step)
+      const bool relist = rebuilding(m, S.rec);
+      if (relist) rebuild(t, S, L, n_active);
+      // density and pressure (and the container frame of this step); on rebuilds the lists
+      // first (the cells walked), then every step the list walked, its entries within h kept
       const ScenePhysics& P = S.rec->phys;
       t.lanes([&](int l) {
         if (l == 0) prepare_frame(m, ctl[s], *S.rec);
@@ -210,9 +215,19 @@ struct ChipStage {
       chip_groups(t, n_active, 0, [&](int i, const auto& Ln, int&) {
         DensityVisitor<D> v{m.kern};
         const Vec3 x = S.pos[i];
-        for_each_in_cells_from(Ln, grid, S.xb[i], x, h2, v, nullptr, 0);
+        int count = 0;
+        if (relist) {
+          NoVisit none;
+          count = for_each_in_cells(Ln, grid, x, none, lists.row(i), m.max_neighbors);
+        } else {
+          count = lists.count[i];
+        }
+        const int kept = lists.walk_compacting(Ln, i, count, S.pos, x, v, h2, near);
         const float sum = Ln.sum(v.sum);
         if (!Ln.leader()) return;
+        near.count[i] = kept;
+        if (count > m.max_neighbors || kept > m.max_near) raise_first(&S.rec->clock.bad, kBadNeighbors);
+        if (relist) lists.count[i] = count;
         const float rho = density_of(m, P, S.rec->die, x, sum);
         const ForceTerms ft = ForceTerms::of(rho, tait_pressure(P.sph, rho));
         S.rho[i] = rho;
@@ -228,7 +243,7 @@ struct ChipStage {
       chip_groups(t, n_active, StepSums::identity(), [&](int i, const auto& Ln, StepSums& acc) {
         const Vec3 x = S.pos[i];
         ForceVisitor<D> fv(m.kern, P.sph, S.vel, S.rho, S.terms, i, n);
-        for_each_in_cells_from(Ln, grid, S.xb[i], x, h2, fv, nullptr, 0);
+        near.walk(Ln, i, S.pos, x, fv);
         fv.reduce(Ln);
         if (!Ln.leader()) return;
         acc = StepSums::combine(acc, particle_forces(m, *S.rec, P, x, S.vel[i], S.rho[i], fv.s, S.acc[i], S.xsph[i]));
@@ -295,27 +310,6 @@ struct ChipStage {
       if (q + 1 == slots || (S.keys[q + 1] >> L.idx_bits) != w) S.cend[slot] = uint32_t(q + 1);
     });
     t.sync();
-  }
-
-  // the cells of the last rebuild, from x_build (the order and the ghosts are as it left them)
-  template <class Tile>
-  CPS_HD void mark_from_build(Tile& t, const ChipSmem& S, const ChipLayout& L, int n_active) const {
-    const Model& m = *model;
-    const int n = L.n;
-    const uint32_t unused = unused_key(m);
-    chip_items(t, L.sort_n > L.cells ? L.sort_n : L.cells, [&](int q) {
-      if (q < 2 * n) S.keys[q] = chip_word(L, q < n ? 0 : 1, unused, 0);
-      if (q < L.cells) S.cstart[q] = S.cend[q] = 0u;
-    });
-    t.sync();
-    chip_items(t, n_active, [&](int q) {
-      const Vec3 xb = S.xb[q];
-      S.keys[q] = chip_word(L, 0, cell_key(m, xb, 0), 0);
-      const int ghost = S.gslot[q];
-      if (ghost >= 0) S.keys[ghost] = chip_word(L, 1, cell_key(m, mirror_position(m.wall, xb), 1), 0);
-    });
-    t.sync();
-    mark(t, S, L);
   }
 
   // sort the scene by cell (fluid, then its ghosts made anew), gather it into that order and

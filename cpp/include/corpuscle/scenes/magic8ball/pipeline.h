@@ -109,9 +109,9 @@ class Pipeline {
 
   // The chip path (chip.h: a block per scene, K steps a launch) where the scenes fit a block's
   // shared memory: chosen for a batch on a device (path -1), forced by path 1 (a device) or 2
-  // (also the CPU's emulated tiles: the tests'); the general path for the rest. The lists and
-  // grid indexes have it (the same neighbours within h: the cells of the last rebuild)
-  static constexpr bool kChipIndex = Index::cells && !Index::compact;
+  // (also the CPU's emulated tiles: the tests'); the general path for the rest. The lists
+  // index has it (its lists, in the pipeline's buffers, are the one array off chip)
+  static constexpr bool kChipIndex = Index::lists;
   static bool choose_chip(Exec& ex, const Model& m) {
     if (m.path == 0) return false;
     const size_t limit = ex.tile_shared_limit();
@@ -120,7 +120,7 @@ class Pipeline {
     if (m.path == 1 && !Exec::on_device)
       throw Error("magic8ball: path = chip runs on the cuda backend (the CPU backends step the general path)");
     if (!kChipIndex)
-      throw Error(std::string("magic8ball: path = chip needs the lists or grid index, got ") + Index::name);
+      throw Error(std::string("magic8ball: path = chip needs the lists index, got ") + Index::name);
     if (!chip_layout(m).words_fit())
       throw Error("magic8ball: path = chip: " + std::to_string(m.n_fluid) +
                   " particle slots a scene and its cell grid need more than 32-bit sort words: use path = general");
