@@ -446,6 +446,7 @@ class Pipeline {
             {"lanes", double(m_.lanes)},  // CUDA lanes per particle in the pair stages
             {"list_scan", double(m_.list_scan)},  // lists rebuilt by a scan of the scene (1) or the cells (0)
             {"chip_path", chip_ ? 1.0 : 0.0},     // the steps run on chip (chip.h: 1) or the general path (0)
+            {"chip_shared_bytes", double(chip_bytes(m_))},  // the shared memory a scene's block needs on chip
             {"die_angular_velocity_x", double(w[0])},
             {"die_angular_velocity_y", double(w[1])},
             {"die_angular_velocity_z", double(w[2])}};
