@@ -39,6 +39,7 @@ namespace cps::m8 {
 constexpr int kChipThreads = 512;  // threads of a scene's block
 constexpr int kChipLanes = 8;      // lanes per particle in the pair passes
 constexpr int kChipGroups = kChipThreads / kChipLanes;
+constexpr int kChipStage = 64;     // list entries a group stages in shared memory at once
 
 // where a scene's arrays lie in its block's shared memory (byte offsets, 16-aligned)
 struct ChipLayout {
@@ -47,7 +48,7 @@ struct ChipLayout {
   int idx_bits = 0;  // bits of an entry (< 2 n) in a sort word
   int key_bits = 0;  // bits of a cell key (the grid's, tag included)
   int cells = 0;     // cell table entries (both tags)
-  size_t rec = 0, parts = 0, pos = 0, vel = 0, rho = 0, terms = 0, scratch = 0, xb = 0, id = 0, gslot = 0,
+  size_t rec = 0, parts = 0, stage = 0, pos = 0, vel = 0, rho = 0, terms = 0, scratch = 0, xb = 0, id = 0, gslot = 0,
          keys = 0, cstart = 0, cend = 0, total = 0;
   // the sort words fit 32 bits: layer, cell key, entry
   CPS_HD bool words_fit() const { return 1 + key_bits + idx_bits <= 32; }
@@ -72,6 +73,7 @@ CPS_HD CPS_INLINE ChipLayout chip_layout(const Model& m) {
   };
   take(L.rec, sizeof(Scene));
   take(L.parts, sizeof(StepSums) * kChipGroups);
+  take(L.stage, sizeof(int) * kChipGroups * kChipStage);
   take(L.pos, sizeof(Vec3) * slots);
   take(L.vel, sizeof(Vec3) * slots);
   take(L.rho, sizeof(float) * slots);
@@ -91,6 +93,7 @@ CPS_HD CPS_INLINE ChipLayout chip_layout(const Model& m) {
 struct ChipSmem {
   Scene* rec;
   StepSums* parts;
+  int* stage;  // kChipStage list entries per lane group
   Vec3 *pos, *vel, *acc, *xsph, *tmp, *xb;
   float* rho;
   ForceTerms* terms;
@@ -100,6 +103,7 @@ struct ChipSmem {
     ChipSmem s;
     s.rec = reinterpret_cast<Scene*>(base + L.rec);
     s.parts = reinterpret_cast<StepSums*>(base + L.parts);
+    s.stage = reinterpret_cast<int*>(base + L.stage);
     s.pos = reinterpret_cast<Vec3*>(base + L.pos);
     s.vel = reinterpret_cast<Vec3*>(base + L.vel);
     s.rho = reinterpret_cast<float*>(base + L.rho);
@@ -118,6 +122,49 @@ struct ChipSmem {
   }
 };
 
+// a lane group's lane and width (the CPU's one lane; a device's SubWarpLanes<W>), and a barrier
+// of the group (its lanes' shared-memory writes seen by all of them)
+CPS_HD CPS_INLINE int group_lane(const SingleLane&) { return 0; }
+CPS_HD CPS_INLINE void group_sync(const SingleLane&) {}
+#ifdef __CUDACC__
+template <int W>
+__device__ int group_lane(const SubWarpLanes<W>& L) { return L.lane(); }
+template <int W>
+__device__ void group_sync(const SubWarpLanes<W>& L) { __syncwarp(L.mask()); }
+#endif
+
+// walk the c entries of a list row (global memory) through the group's staging buffer in
+// shared memory, kChipStage at a time: every lane loads its entries of a chunk at once (one
+// memory latency a chunk, not one an entry), then walk(chunk, count, offset) visits them. A
+// chunk is a whole number of lane rounds, so each lane visits the entries it would visit
+// walking the row itself, in the same order: the same sums
+template <class Ln, class Walk>
+CPS_HD void staged_rows(const Ln& L, int* buf, const int* row, int c, Walk&& walk) {
+  constexpr int kMost = kChipStage;
+  for (int c0 = 0; c0 < c; c0 += kMost) {
+    const int cn = c - c0 < kMost ? c - c0 : kMost;
+#ifdef __CUDA_ARCH__
+    constexpr int kPer = kChipStage / kChipLanes;
+    int v[kPer];
+#pragma unroll
+    for (int k = 0; k < kPer; ++k) {
+      const int e = group_lane(L) + k * kChipLanes;
+      v[k] = e < cn ? row[c0 + e] : 0;
+    }
+#pragma unroll
+    for (int k = 0; k < kPer; ++k) {
+      const int e = group_lane(L) + k * kChipLanes;
+      if (e < cn) buf[e] = v[k];
+    }
+#else
+    for (int e = 0; e < cn; ++e) buf[e] = row[c0 + e];
+#endif
+    group_sync(L);
+    walk(static_cast<const int*>(buf), cn, c0);
+    group_sync(L);  // (the next chunk overwrites the buffer)
+  }
+}
+
 // g(i, L, acc) for i in [0, n) by groups of kChipLanes lanes (the CPU: one lane a group), the
 // group's items in a fixed order; done(group, acc) by each group's leader once its items are
 // done (every group, with or without items)
@@ -132,7 +179,7 @@ CPS_HD void chip_groups(Tile& t, int n, const Acc& init, G&& g, Done&& done) {
 #endif
     const int group = l / kChipLanes;
     Acc acc = init;
-    for (int i = group; i < n; i += kChipGroups) g(i, L, acc);
+    for (int i = group; i < n; i += kChipGroups) g(i, L, acc, group);
     if (L.leader()) done(group, acc);
   });
 }
@@ -212,7 +259,7 @@ struct ChipStage {
       t.lanes([&](int l) {
         if (l == 0) prepare_frame(m, ctl[s], *S.rec);
       });
-      chip_groups(t, n_active, 0, [&](int i, const auto& Ln, int&) {
+      chip_groups(t, n_active, 0, [&](int i, const auto& Ln, int&, int group) {
         DensityVisitor<D> v{m.kern};
         const Vec3 x = S.pos[i];
         int count = 0;
@@ -222,7 +269,13 @@ struct ChipStage {
         } else {
           count = lists.count[i];
         }
-        const int kept = lists.walk_compacting(Ln, i, count, S.pos, x, v, h2, near);
+        int kept = 0;
+        int* out = near.row(i);
+        staged_rows(Ln, S.stage + group * kChipStage, lists.row(i), lists.stored(count),
+                    [&](const int* chunk, int cn, int) {
+                      kept += for_each_listed_compacting(Ln, chunk, cn, S.pos, x, v, h2, out + kept,
+                                                         near.capacity - kept);
+                    });
         const float sum = Ln.sum(v.sum);
         if (!Ln.leader()) return;
         near.count[i] = kept;
@@ -240,10 +293,11 @@ struct ChipStage {
       }, [](int, int) {});
       t.sync();
       // forces, the die's reactions and the step's reductions
-      chip_groups(t, n_active, StepSums::identity(), [&](int i, const auto& Ln, StepSums& acc) {
+      chip_groups(t, n_active, StepSums::identity(), [&](int i, const auto& Ln, StepSums& acc, int group) {
         const Vec3 x = S.pos[i];
         ForceVisitor<D> fv(m.kern, P.sph, S.vel, S.rho, S.terms, i, n);
-        near.walk(Ln, i, S.pos, x, fv);
+        staged_rows(Ln, S.stage + group * kChipStage, near.row(i), near.listed(i),
+                    [&](const int* chunk, int cn, int) { for_each_listed(Ln, chunk, cn, S.pos, x, fv); });
         fv.reduce(Ln);
         if (!Ln.leader()) return;
         acc = StepSums::combine(acc, particle_forces(m, *S.rec, P, x, S.vel[i], S.rho[i], fv.s, S.acc[i], S.xsph[i]));
