@@ -141,6 +141,7 @@ __device__ void group_sync(const SubWarpLanes<W>& L) { __syncwarp(L.mask()); }
 template <class Ln, class Walk>
 CPS_HD void staged_rows(const Ln& L, int* buf, const int* row, int c, Walk&& walk) {
   constexpr int kMost = kChipStage;
+  group_sync(L);  // the row's entries, just written by the group's lanes (a rebuild's listing, the density's near list)
   for (int c0 = 0; c0 < c; c0 += kMost) {
     const int cn = c - c0 < kMost ? c - c0 : kMost;
 #ifdef __CUDA_ARCH__
