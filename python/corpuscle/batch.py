@@ -81,6 +81,20 @@ def _random_quaternions(rng: np.random.Generator, k: int) -> np.ndarray:
                      b * np.sin(2 * np.pi * u3)], axis=1)
 
 
+#: the core's codes of the step's paths (``path`` of Batch.from_scene, ``bench --path``);
+#: ``"chip-emulated"`` runs the chip path's code on the CPU's emulated tiles (the tests')
+PATHS = {"auto": -1, "general": 0, "chip": 1, "chip-emulated": 2}
+
+
+def core_path(path: str, backend: str, key: str = "path") -> int:
+    """The core's code of a step path, checked against the backend (a one-line ValueError)."""
+    if path not in PATHS:
+        raise ValueError(f"{key} must be one of auto, general, chip, got {path!r}")
+    if path == "chip" and backend != "cuda":
+        raise ValueError(f"{key} = chip runs on the cuda backend, got backend {backend!r} (use general or auto)")
+    return PATHS[path]
+
+
 def _split_overrides(n: int, overrides: dict[str, Any]) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Shared overrides and per-scene arrays (keys of PER_SCENE_KEYS given n values)."""
     shared, per = {}, {}
@@ -119,7 +133,7 @@ class Batch:
     def from_scene(cls, scene="magic8ball", n: int = 1, backend: str = "auto",
                    overrides: dict[str, Any] | None = None, neighbors: str | None = None, device: int | None = None,
                    settle: float = 1.0, randomize: bool = True, placement: str = "rotated",
-                   comm=None, **kwargs) -> "Batch":
+                   comm=None, path: str | None = None, **kwargs) -> "Batch":
         """n scenes of one scene file (a built-in name, a TOML path or a Scene), with
         overrides as :meth:`corpuscle.Simulation.from_scene` takes them (dotted keys or
         ``__`` for the dot; ``particles``, ``seed``, ``end_time``). The keys of
@@ -138,6 +152,13 @@ class Batch:
         ``randomize``: whether :meth:`reset`, and the start, turn each scene by a random
         symmetry (about gravity, and the die by a rotation of its cube).
 
+        ``path``: how the device steps the scenes: ``"chip"`` (a block per scene, the scene in
+        the multiprocessor's shared memory, many steps a launch: docs/magic8ball.md),
+        ``"general"`` (the engine's stages over global memory), or ``"auto"`` (chip where the
+        scenes fit on the cuda backend, else general); None: the scene's ``sph.path``.
+        ``"chip"`` on a CPU backend, or where a scene does not fit, is a ``ValueError``.
+        :attr:`path` says which runs.
+
         ``comm`` (an mpi4py communicator, e.g. ``MPI.COMM_WORLD``; docs/distributed.md): the n
         scenes are spread over its ranks in contiguous blocks, rank r holding scenes
         ``[scene_offset, scene_offset + n_scenes)`` on its own backend and device (``device``
@@ -149,17 +170,17 @@ class Batch:
         """
         if comm is None:
             return cls._build(scene, n, backend, overrides, neighbors, 0 if device is None else device, settle,
-                              randomize, placement, None, **kwargs)
+                              randomize, placement, None, path, **kwargs)
         from . import _mpi
 
         if device is None and resolve_backend(backend) == "cuda":
             local, _ = _mpi.node_local_rank(comm)
             device = local % max(1, len(_core().build_info().get("gpus") or [None]))
         return _mpi.agree(comm, lambda: cls._build(scene, n, backend, overrides, neighbors, device or 0, settle,
-                                                   randomize, placement, comm, **kwargs))
+                                                   randomize, placement, comm, path, **kwargs))
 
     @classmethod
-    def _build(cls, scene, n, backend, overrides, neighbors, device, settle, randomize, placement, comm,
+    def _build(cls, scene, n, backend, overrides, neighbors, device, settle, randomize, placement, comm, path=None,
                **kwargs) -> "Batch":
         from .scene import Scene, load_scene
 
@@ -192,6 +213,7 @@ class Batch:
             raise ValueError(f"n = {n_loc} scenes{' on a rank' if comm is not None else ''} of fluid.particles = {n_most}: {n_loc * n_most:,} particle slots, "
                              f"at most {MAX_SLOTS:,}")
         self.backend = resolve_backend(backend)
+        path_code = None if path is None else core_path(path, self.backend)
         self.device = _count("device", device)
         have, where = _kinds.memory_available(Target(self.backend, "lists", self.device))
         if have is not None and n_loc * n_most * MIN_SLOT_BYTES > have:
@@ -242,6 +264,8 @@ class Batch:
         params = dict(ref.params)
         params["n_fluid"] = n_max
         params["n_scenes"] = n_loc
+        if path_code is not None:
+            params["path"] = path_code
         # per-scene parameters
         side = cols["die.side"].astype(np.float64)
         radius = float(v["container.radius"])
@@ -290,8 +314,13 @@ class Batch:
         self.n_active = counts[lo:hi].copy()
         self._rng = np.random.default_rng(int(seeds[lo]) + 0x8BA11)
         self._sym = cube_rotations()
-        self.core = _core().Simulation("magic8ball", self.backend, self.neighbors, params,
-                                       {"position": pos, "velocity": np.zeros_like(pos)}, self.device)
+        try:
+            self.core = _core().Simulation("magic8ball", self.backend, self.neighbors, params,
+                                           {"position": pos, "velocity": np.zeros_like(pos)}, self.device)
+        except Exception as exc:  # the core's refusal of path = chip: one line, a ValueError
+            if "path = chip" in str(exc):
+                raise ValueError(str(exc).removeprefix("magic8ball: ")) from None
+            raise
         self._controls = sum(int(c) for c in dict(self.core.controls()).values())
         self.core.evaluate()
         # settle, keep the reset cache, start every scene from it
@@ -320,6 +349,11 @@ class Batch:
         qi = q * np.array([1.0, -1.0, -1.0, -1.0])
         axes = _rotate(qi, np.broadcast_to(g, (self.n_scenes, 3)))
         return axes / np.linalg.norm(axes, axis=1, keepdims=True)
+
+    @property
+    def path(self) -> str:
+        """The path the scenes are stepped on: ``"chip"`` or ``"general"`` (see from_scene)."""
+        return "chip" if dict(self.core.scalars(0)).get("chip_path", 0.0) else "general"
 
     # stepping -------------------------------------------------------------------------
     def step(self, k: int = 1) -> int:

@@ -309,6 +309,9 @@ struct CpuExec {
     });
   }
 
+  // the most scratch a tile may ask for (a CPU tile's is heap memory: no device limit)
+  size_t tile_shared_limit() const { return size_t(1) << 30; }
+
   // f(tile, CpuTile<kTile>&) for tile in [0, ntiles): CUDA runs a block of kTile threads per
   // tile; here one thread runs a tile's lanes phase by phase (see CpuTile), tiles spread over
   // the OpenMP threads, each with its own shared_bytes of scratch

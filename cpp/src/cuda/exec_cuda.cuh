@@ -669,6 +669,13 @@ struct CudaExec {
     CPS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp_, bytes, kin, kout, vin, vout, n, 0, bits, stream_));
   }
 
+  // the most dynamic shared memory a tile (block) may request on this device
+  size_t tile_shared_limit() const {
+    int v = 0;
+    CPS_CUDA_CHECK(cudaDeviceGetAttribute(&v, cudaDevAttrMaxSharedMemoryPerBlockOptin, device_));
+    return size_t(v);
+  }
+
   // f(tile, CudaTile<kTile>&) on a block of kTile threads per tile, with shared_bytes of
   // dynamic shared memory per block (more than 48 KiB is requested from the device)
   template <int kTile, class F>

@@ -39,6 +39,10 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", nargs="+", metavar="B",
                    help="time batches of B independent scenes stepped together (magic8ball; several values: a sweep); "
                         "reports scene-steps/s and particle-steps/s")
+    p.add_argument("--path", choices=("auto", "general", "chip"),
+                   help="magic8ball on cuda: step on chip (a thread block per scene, the scene in shared memory, many "
+                        "steps a launch) or the general path; auto (the default): chip for a batch whose scenes fit. "
+                        "The row's `path` says which ran")
     p.add_argument("--json", metavar="FILE", help="also write the results as a JSON list of rows to FILE")
     p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")
     p.add_argument("--plot", metavar="FILE.png",
@@ -74,6 +78,13 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         args.particles = size
         scenes.append(load_with_options(args, {}))
     scene = scenes[0]
+    if args.path is not None:
+        if scene.kind != "magic8ball":
+            raise UsageError(f"--path {args.path}: the step's paths are magic8ball's, got kind {scene.kind!r}")
+        if args.path == "chip" and args.backend and any(b != "cuda" for b in args.backend):
+            raise UsageError(f"--path chip runs on the cuda backend, got --backend {' '.join(args.backend)}")
+        scenes = [sc.with_overrides({"sph.path": args.path}) for sc in scenes]
+        scene = scenes[0]
     batches = [int_option("--batch", b, minimum=1) for b in args.batch] if args.batch else [None]
     if args.batch and scene.kind != "magic8ball":
         raise UsageError(f"--batch: batches of scenes are magic8ball scenes, got kind {scene.kind!r}")
@@ -107,6 +118,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     backends = list(dict.fromkeys(args.backend)) if args.backend else [
         b for b in BACKENDS if b != "cuda" or Simulation.cuda_available()
     ]
+    if args.path == "chip" and backends != ["cuda"]:
+        raise UsageError("--path chip runs on the cuda backend" + ("" if "cuda" in backends else
+                                                                   ", and this machine has no CUDA device") +
+                         ": add --backend cuda")
     info = build_info()
     date = now_iso()
 
@@ -145,6 +160,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                     # no settling: the timing does not depend on it
                     sim = Batch.from_scene(scene, n=batch, backend=backend, neighbors=index, device=args.device,
                                            settle=0.0)
+            if args.path == "chip" and _path_of(sim) != "chip":
+                raise UsageError(f"--path chip: the {backend} run steps the general path")
             init_seconds = time.perf_counter() - t_init
             if start_time > 0.0:
                 if bar is not None:
@@ -183,6 +200,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                 "particle_steps_per_second": sps * n,
                 "seconds": times,
                 "neighbors": getattr(sim, "neighbors", None),
+                "path": _path_of(sim),
                 "device": device_name(backend, info, args.device),
                 "date": date,
                 "version": __version__,
@@ -239,6 +257,14 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _path_of(sim) -> str | None:
+    """How a magic8ball run steps (chip or general; None for other kinds)."""
+    if hasattr(sim, "path"):
+        return sim.path
+    values = dict(sim.scalars())
+    return None if "chip_path" not in values else ("chip" if values["chip_path"] else "general")
+
+
 def _bench_advance(sim, until: float, backend: str) -> None:
     """`bench --start-time`: the scene run to simulated time `until` (untimed); an unsound run
     stops the benchmark with the step it went bad at."""
@@ -261,7 +287,8 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
     serial = None if batched else next((r for r in rows if r["backend"] == "serial"), None)
     sweep = len({(r["particles"], r.get("neighbors")) for r in rows}) > 1
     nbr = any("mean_neighbors" in r for r in rows)
-    head = f"{'backend':<8} " + (f"{'batch':>7} " if batched else "") + f"{'particles':>10} {'init(s)':>8} {'steps/s':>12} "
+    paths = any(r.get("path") == "chip" for r in rows)  # (the JSON rows always say)
+    head = f"{'backend':<8} " + (f"{'path':<8}" if paths else "") + (f"{'batch':>7} " if batched else "") + f"{'particles':>10} {'init(s)':>8} {'steps/s':>12} "
     head += (f"{'scene-steps/s':>14} " if batched else "") + f"{'particle-steps/s':>18}"
     tts = any(r.get("wall_seconds_per_sim_second") is not None for r in rows)
     if tts:
@@ -275,7 +302,8 @@ def _print_bench(rows: list[dict[str, Any]]) -> None:
             print(f"{str(r.get('neighbors')):<9}", end="")
         init = r.get("init_seconds")
         init_text = f"{init:8.3f}" if isinstance(init, (int, float)) else f"{'':>8}"
-        line = (f"{r['backend']:<8} " + (f"{r.get('batch', 1):>7,} " if batched else "") +
+        line = (f"{r['backend']:<8} " + (f"{str(r.get('path') or '-'):<8}" if paths else "") +
+                (f"{r.get('batch', 1):>7,} " if batched else "") +
                 f"{r['particles']:>10,} {init_text} {fmt_rate(r['steps_per_second']):>12} " +
                 (f"{fmt_rate(r['scene_steps_per_second']):>14} " if batched else "") +
                 f"{fmt_rate(r['particle_steps_per_second']):>18}")

@@ -80,6 +80,10 @@ MAGIC8BALL_KEYS: dict[str, KeySpec] = {
     "sph.list_build": _K("enum", "auto", "", doc="how the neighbour lists are rebuilt: cells (the 27 cells around "
                          "each particle) or scan (every particle and ghost of its scene: cheaper for small scenes); "
                          "auto: scan up to 500 particles a scene", choices=("auto", "cells", "scan")),
+    "sph.path": _K("enum", "auto", "", doc="how the cuda backend steps the scenes: chip (a thread block per scene, "
+                   "the scene in the multiprocessor's shared memory, many steps a launch), general (the engine's "
+                   "stages over global memory); auto: chip for a batch whose scenes fit (docs/magic8ball.md)",
+                   choices=("auto", "general", "chip")),
     "sph.max_list_memory": _K("float", 0.0, "MB", 0.0, 1e9,
                               "most memory the neighbour lists may grow to when they overflow; 0: what the backend has free"),
     # gravity
@@ -273,6 +277,9 @@ class Magic8Ball(Kind):
         params["skin_distance"] = list_radius - h
         params["lanes"] = int(v["sph.lanes"])
         params["list_scan"] = {"auto": -1, "cells": 0, "scan": 1}[v["sph.list_build"]]
+        from ..batch import core_path  # (batch imports this module)
+
+        params["path"] = core_path(v["sph.path"], target.backend, "sph.path")
 
         # list capacity: 2.5 times the mean count within the list radius (the fluid compresses
         # a few percent; a list that still overflows stops the run as unstable), in warp widths

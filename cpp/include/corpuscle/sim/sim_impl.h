@@ -34,6 +34,12 @@ template <class P, class = void>
 struct has_ranks_api : std::false_type {};
 template <class P>
 struct has_ranks_api<P, std::void_t<decltype(std::declval<P&>().enqueue_half(0, nullptr, 0))>> : std::true_type {};
+// whether a kind's pipeline can take several steps in one launch (chip_steps, enqueue_chip:
+// the 8-ball's chip path)
+template <class P, class = void>
+struct has_chip_steps : std::false_type {};
+template <class P>
+struct has_chip_steps<P, std::void_t<decltype(std::declval<P&>().chip_steps(1LL))>> : std::true_type {};
 
 template <class Exec, class P>
 class SimImpl final : public Sim {
@@ -73,7 +79,9 @@ class SimImpl final : public Sim {
     if (all_halted(records().data()) && !recover()) return 0;
     std::vector<long long> first;
     for (const Record& r : rec_) first.push_back(r.clock.step);
-    const int batch = Exec::on_device ? kPollBatch : 1;
+    bool multi = false;  // launches of several steps: batches of them on the CPU too
+    if constexpr (has_chip_steps<P>::value) multi = p_.chip_steps(2) > 1;
+    const int batch = Exec::on_device || multi ? kPollBatch : 1;
     flush_control();
     bool stopped = false;
     for (long long k = 0; k < n && !stopped;) {
@@ -82,10 +90,18 @@ class SimImpl final : public Sim {
       rec_valid_ = false;
       while (k < n) {
         const long long b = std::min<long long>(batch, n - k);
-        for (long long j = 0; j < b; ++j) {
+        for (long long j = 0; j < b;) {
           p_.prepare();
-          ex_.launch_step(p_.graph_slot(), [&] { p_.enqueue(true); });
+          int steps = 0;  // several steps in one launch (a pipeline's chip path), or one
+          if constexpr (has_chip_steps<P>::value) steps = p_.chip_steps(b - j);
+          if (steps > 0) {
+            if constexpr (has_chip_steps<P>::value) p_.enqueue_chip(steps);
+          } else {
+            ex_.launch_step(p_.graph_slot(), [&] { p_.enqueue(true); });
+            steps = 1;
+          }
           p_.advance(true);
+          j += steps;
         }
         k += b;
         ex_.poll_begin(slot, record_.data(), sizeof(Record) * rec_.size());

@@ -49,6 +49,10 @@ inline Model build_model(const ParamSource& p) {
   m.lanes = p.has("lanes") ? int(p.integer("lanes")) : 0;
   if (m.lanes == 0) m.lanes = auto_lanes(m);
   m.wide_keys = p.has("wide_keys") && p.integer("wide_keys") != 0 ? 1 : 0;
+  m.path = p.has("path") ? int(p.integer("path")) : -1;
+  if (m.path < -1 || m.path > 2)
+    throw Error("magic8ball: path must be -1 (chosen), 0 (general), 1 (chip) or 2 (chip, also on the CPU), got " +
+                std::to_string(m.path));
   m.list_scan = p.has("list_scan") ? int(p.integer("list_scan")) : -1;
   if (m.list_scan < 0) m.list_scan = auto_list_scan(m);
   if (m.list_scan > 1) throw Error("magic8ball: list_scan must be 0 (cells), 1 (scan) or -1 (automatic)");

@@ -34,6 +34,8 @@ struct Model {
   int lanes;             // CUDA lanes per particle in the pair stages: 32 (a warp), 16, 8 or 4 (the CPU: one)
   int list_scan;         // lists: rebuilt by a scan of each particle's whole scene (1) or the cell walk (0)
   int wide_keys;         // a batch sorts 64-bit keys even where 32-bit ones hold them (a test's switch)
+  int path;              // the step's path: -1 chosen (chip where a batch's scenes fit), 0 general, 1 chip
+                         // (a device's), 2 chip also on the CPU (its tiles emulated: the tests' switch)
   double max_list_bytes; // the lists may grow to this on overflow (0: what the backend has free)
   float list_radius;     // neighbour lists and cells: h (1 + skin)
   float skin_distance;   // list_radius - h: how far pairs may close in before the lists are stale (0: every step)

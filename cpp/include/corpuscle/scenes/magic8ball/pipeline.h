@@ -17,6 +17,7 @@
 
 #include "corpuscle/core/error.h"
 #include "corpuscle/scenes/magic8ball/batch.h"
+#include "corpuscle/scenes/magic8ball/chip.h"
 #include "corpuscle/scenes/magic8ball/stages.h"
 #include "corpuscle/scenes/magic8ball/tables.h"
 
@@ -103,6 +104,44 @@ class Pipeline {
       }
       scene_sums_.resize(m.n_scenes);
     }
+    chip_ = choose_chip(ex_, m);
+  }
+
+  // The chip path (chip.h: a block per scene, K steps a launch) where the scenes fit a block's
+  // shared memory: chosen for a batch on a device (path -1), forced by path 1 (a device) or 2
+  // (also the CPU's emulated tiles: the tests'); the general path for the rest. The lists
+  // index has it (its lists, in the pipeline's buffers, are the one array off chip)
+  static constexpr bool kChipIndex = Index::lists;
+  static bool choose_chip(Exec& ex, const Model& m) {
+    if (m.path == 0) return false;
+    const size_t limit = ex.tile_shared_limit();
+    const bool fits = kChipIndex && chip_fits(m, limit);
+    if (m.path < 0) return Exec::on_device && m.n_scenes > 1 && fits;
+    if (m.path == 1 && !Exec::on_device)
+      throw Error("magic8ball: path = chip runs on the cuda backend (the CPU backends step the general path)");
+    if (!kChipIndex)
+      throw Error(std::string("magic8ball: path = chip needs the lists index, got ") + Index::name);
+    if (!chip_layout(m).words_fit())
+      throw Error("magic8ball: path = chip: " + std::to_string(m.n_fluid) +
+                  " particle slots a scene and its cell grid need more than 32-bit sort words: use path = general");
+    if (!fits) {
+      char msg[320];
+      std::snprintf(msg, sizeof msg,
+                    "magic8ball: path = chip: a scene of %d particle slots needs %.1f KiB of shared memory a block, "
+                    "the device has %.1f KiB: use path = general (or fewer particles a scene)",
+                    m.n_fluid, double(chip_bytes(m)) / 1024.0, double(limit) / 1024.0);
+      throw Error(msg);
+    }
+    return true;
+  }
+  bool chip() const { return chip_; }
+  // steps the next launch takes on chip (at most `want`), or 0: the general path's one step
+  int chip_steps(long long want) const { return chip_ ? int(std::min<long long>(want, kChipLaunchSteps)) : 0; }
+  static constexpr int kChipLaunchSteps = 1024;
+  // k steps of every scene on chip, one launch (the state in the other buffers: advance flips)
+  void enqueue_chip(int k) {
+    ex_.template for_each_tile<kChipThreads>(m_.n_scenes, ChipStage{model_.data(), g_, u_, arrays(parity_, parity_ ^ 1), k},
+                                             chip_bytes(m_));
   }
 
   int scenes() const { return m_.n_scenes; }
@@ -198,6 +237,15 @@ class Pipeline {
   // A single run and a batch run the same stages, the single run's instantiated without
   // the per-item scene arithmetic
   void enqueue(bool integrate) {
+    if (chip_) {
+      if (integrate) {
+        enqueue_chip(1);
+        return;
+      }
+      // an evaluation by the general stages: the chip path keeps no lists, so every scene
+      // sorts and relists (as a new state's first step does)
+      ex_.for_each(keys_items(m_), KeysStage{model_.data(), g_, arrays(parity_, parity_ ^ 1)});
+    }
     if (m_.n_scenes == 1) enqueue_as<false>(integrate);
     else enqueue_as<true>(integrate);
   }
@@ -397,6 +445,8 @@ class Pipeline {
             {"max_near", double(m_.max_near)},
             {"lanes", double(m_.lanes)},  // CUDA lanes per particle in the pair stages
             {"list_scan", double(m_.list_scan)},  // lists rebuilt by a scan of the scene (1) or the cells (0)
+            {"chip_path", chip_ ? 1.0 : 0.0},     // the steps run on chip (chip.h: 1) or the general path (0)
+            {"chip_shared_bytes", double(chip_bytes(m_))},  // the shared memory a scene's block needs on chip
             {"die_angular_velocity_x", double(w[0])},
             {"die_angular_velocity_y", double(w[1])},
             {"die_angular_velocity_z", double(w[2])}};
@@ -455,6 +505,7 @@ class Pipeline {
   int parity_ = 0;
   bool sorted_ = false;
   bool keys_ready_ = false;  // the last step's integration keyed the current state
+  bool chip_ = false;        // the steps run on chip (choose_chip)
 };
 
 }  // namespace cps::m8

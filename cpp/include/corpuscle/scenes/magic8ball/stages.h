@@ -348,6 +348,14 @@ CPS_HD CPS_INLINE bool idle_slot(const Model& m, const Scene* gs, int i, int s) 
   return halted(gs) || (Many && i - s * m.n_fluid >= gs->phys.n_active);
 }
 
+// particle i's density at x from its Poly6 kernel sum: renormalised by the fluid share of the
+// kernel the die leaves (box_fraction), then floored (every path's density stage)
+CPS_HD CPS_INLINE float density_of(const Model& m, const ScenePhysics& P, const RigidState& die, const Vec3& x,
+                                   float sum) {
+  const float cut = m.kern.poly6.box_fraction(P.die.half, qrotate_inv(die.q, x - die.x));
+  return finish_density(P.sph, sum / (1.0f - fmin2(cut, 0.5f)));
+}
+
 template <class Index, bool Many>
 struct DensityStage {
   const Model* model;
@@ -393,9 +401,8 @@ struct DensityStage {
       if (rebuild) a.nbr_count[i] = count;
     }
     if (rebuild) a.ghost_slot[i] = a.ghost_of[a.perm[i]];
-    float cut = m.kern.poly6.box_fraction(P.die.half, qrotate_inv(gs->die.q, x - gs->die.x));
-    float rho = finish_density(P.sph, sum / (1.0f - fmin2(cut, 0.5f)));
-    float p = tait_pressure(P.sph, rho);
+    const float rho = density_of(m, P, gs->die, x, sum);
+    const float p = tait_pressure(P.sph, rho);
     const ForceTerms t = ForceTerms::of(rho, p);
     a.density[i] = rho;
     a.pressure[i] = p;
@@ -409,6 +416,33 @@ struct DensityStage {
     }
   }
 };
+
+// particle i's acceleration (pair sums, container frame, die contact) and XSPH correction
+// from its pair sums f, and its item of the step's reductions (every path's force stage)
+CPS_HD CPS_INLINE StepSums particle_forces(const Model& m, const Scene& g, const ScenePhysics& P, const Vec3& x,
+                                           const Vec3& v, float rho, const ForceSum<D>& f, Vec3& acc_out,
+                                           Vec3& xsph_out) {
+  Vec3 acc = ForcePairs<D>::acceleration(P.sph, f) + frame_acceleration(g.frame, x, v);
+  StepSums s = StepSums::identity();
+  // die: contact spring + drag on the particle, reaction on the die
+  Vec3 ad;
+  if (body_contact(m.contact, P.die, g.die, x, v, ad)) {
+    acc += ad;
+    Vec3 F = ad * (-P.sph.mass);
+    s.force = F;
+    s.torque = cross(x - g.die.x, F);
+    s.contacts = 1;
+  }
+  acc_out = acc;
+  xsph_out = ForcePairs<D>::xsph_correction(P.sph, f);
+  float err = rho / P.sph.rest_density - 1.0f;
+  s.vmax2 = norm2(v);
+  s.amax2 = norm2(acc);
+  s.rho_err = err < 0.0f ? -err : err;
+  s.rho_sum = rho;
+  s.ke = 0.5f * P.sph.mass * s.vmax2;
+  return s;
+}
 
 // stage 4: SPH forces (over the neighbours the density stage listed), XSPH, container-frame
 // terms and die coupling of fluid particles; the per-particle contributions to this step's
@@ -449,29 +483,7 @@ struct ForceStage {
   }
   // particle i's acceleration, XSPH correction and reduction item from its pair sums
   CPS_HD void write(int i, const Scene* gs, const ScenePhysics& P, const Vec3& x, const ForceSum<D>& f) const {
-    const Model& m = *model;
-    Vec3 v = a.velocity[i];
-    Vec3 acc = ForcePairs<D>::acceleration(P.sph, f) + frame_acceleration(gs->frame, x, v);
-    StepSums s = StepSums::identity();
-    // die: contact spring + drag on the particle, reaction on the die
-    Vec3 ad;
-    if (body_contact(m.contact, P.die, gs->die, x, v, ad)) {
-      acc += ad;
-      Vec3 F = ad * (-P.sph.mass);
-      s.force = F;
-      s.torque = cross(x - gs->die.x, F);
-      s.contacts = 1;
-    }
-    a.acceleration[i] = acc;
-    a.xsph[i] = ForcePairs<D>::xsph_correction(P.sph, f);
-    float rho = a.density[i];
-    float err = rho / P.sph.rest_density - 1.0f;
-    s.vmax2 = norm2(v);
-    s.amax2 = norm2(acc);
-    s.rho_err = err < 0.0f ? -err : err;
-    s.rho_sum = rho;
-    s.ke = 0.5f * P.sph.mass * s.vmax2;
-    a.items[i] = s;
+    a.items[i] = particle_forces(*model, *gs, P, x, a.velocity[i], a.density[i], f, a.acceleration[i], a.xsph[i]);
   }
 };
 
@@ -588,6 +600,28 @@ struct FinalizeStage {
   }
 };
 
+// one fluid particle's step of dt = gs->step_dt (symplectic Euler, XSPH-corrected drift, the
+// wall), its ghost (where it has one: *xg, *vg) moved with it, and how far both moved since
+// the last rebuild raised into gs->moved (every path's integration)
+CPS_HD CPS_INLINE void integrate_particle(const Model& m, Scene* gs, const Vec3& acc, const Vec3& xsph, const Vec3& xb,
+                                          Vec3& x, Vec3& v, Vec3* xg, Vec3* vg) {
+  const float dt = gs->step_dt;
+  v = v + acc * dt;
+  x = x + (v + xsph) * dt;
+  reflect_at_wall(m.wall, x, v);
+  if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&gs->clock.bad, kBadParticles);
+  // the ghost follows its particle between rebuilds
+  if (xg) {
+    const Vec3 g = mirror_position(m.wall, x);
+    *xg = g;
+    *vg = mirror_velocity(x, v);
+    if (ghost_matters(m, x)) atomic_max_above(&gs->moved[1], float_bits(norm2(g - mirror_position(m.wall, xb))));
+  }
+  // how far it moved since the last rebuild: the next step relists when the scene moved
+  // too far for its lists (moved_too_far)
+  atomic_max_above(&gs->moved[0], float_bits(norm2(x - xb)));
+}
+
 // stage 6: integrate fluid (symplectic Euler, XSPH-corrected drift), enforce the wall, and
 // start the next step (its keys, cleared cell table and frame) in the same pass
 template <bool Many>
@@ -606,25 +640,13 @@ struct IntegrateStage {
     const bool taken = active && gs->step_dt > 0.0f;
     if (fluid && !taken) x = a.position[i];
     if (fluid && taken) {
-      float dt = gs->step_dt;
-      Vec3 v = a.velocity[i] + a.acceleration[i] * dt;
-      x = a.position[i] + (v + a.xsph[i]) * dt;
-      reflect_at_wall(m.wall, x, v);
-      if (!finite(x[0] + x[1] + x[2] + v[0] + v[1] + v[2])) raise_first(&gs->clock.bad, kBadParticles);
+      Vec3 v = a.velocity[i];
+      x = a.position[i];
+      const int ghost = a.ghost_slot[i];
+      integrate_particle(m, gs, a.acceleration[i], a.xsph[i], a.x_build[i], x, v, ghost >= 0 ? a.position + ghost : nullptr,
+                         ghost >= 0 ? a.velocity + ghost : nullptr);
       a.position[i] = x;
       a.velocity[i] = v;
-      // the ghost follows its particle between rebuilds
-      const Vec3 xb = a.x_build[i];
-      int ghost = a.ghost_slot[i];
-      if (ghost >= 0) {
-        const Vec3 xg = mirror_position(m.wall, x);
-        a.position[ghost] = xg;
-        a.velocity[ghost] = mirror_velocity(x, v);
-        if (ghost_matters(m, x)) atomic_max_above(&gs->moved[1], float_bits(norm2(xg - mirror_position(m.wall, xb))));
-      }
-      // how far it moved since the last rebuild: the next step relists when the scene moved
-      // too far for its lists (moved_too_far)
-      atomic_max_above(&gs->moved[0], float_bits(norm2(x - xb)));
     }
     start_step(m, a, i, &x, active);
   }
