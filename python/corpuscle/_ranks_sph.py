@@ -1,4 +1,6 @@
 """One SPH box scene split over MPI ranks (docs/distributed.md, "One scene over many ranks").
+(It is longer than 600 lines: the decomposition, the halo refresh, the migration, the balancing
+and the gather of the one output all act on one rank's state, and a step reads in one place.)
 
 Every rank runs the same Python: the scene is built the same way on each, then each rank keeps
 the particles of its slab (along the domain's longest axis without a periodic wrap, cut on
@@ -569,6 +571,9 @@ class RankedCore:
             out[w] = self._gathered(f, True)
         out["outside"] = self.outside
         out["outside_max"] = self.outside_max
+        for f in self.raw.fields():  # a field of its own group that ranks refuse (the transport velocity's): empty
+            if f["checkpointed"] and f["name"] not in out:
+                out[f["name"]] = local[f["name"]]
         return out
 
     def restore(self, full: dict) -> None:
@@ -592,6 +597,10 @@ class RankedCore:
                 continue
             name = f["name"]
             base = WALL_FIELDS.get(name, name)
+            if base not in keep:  # a field of its own group that ranks refuse (the transport velocity's): empty
+                comps = int(f["components"])
+                state[name] = np.zeros((0, comps) if comps > 1 else (0,), dtype=np.dtype(f["dtype"]))
+                continue
             part = keep[base][nf_local:] if name in WALL_FIELDS else keep[base][:nf_local]
             if name == "wall_id":
                 part = np.arange(nf_local, n, dtype=np.int32)

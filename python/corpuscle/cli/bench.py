@@ -261,7 +261,8 @@ def _path_of(sim) -> str | None:
     """How a magic8ball run steps (chip or general; None for other kinds)."""
     if hasattr(sim, "path"):
         return sim.path
-    values = dict(sim.scalars())
+    scalars = getattr(sim, "scalars", None)
+    values = dict(scalars()) if callable(scalars) else {}
     return None if "chip_path" not in values else ("chip" if values["chip_path"] else "general")
 
 

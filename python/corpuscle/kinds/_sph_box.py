@@ -1,6 +1,8 @@
 """Weakly compressible SPH in a closed box: what the kinds ``fluid-box`` (seed 002's block of
 fluid in a box), ``dam-break`` (3-D) and ``dam-break-2d`` (Martin & Moyce's column of width a
 and height 2a against a wall) share. The core is cpp/include/corpuscle/scenes/sph/.
+(It is longer than 600 lines: the kind's keys, build and readings for every SPH box feature meet
+here; the probes' and the bodies' own logic is in _sph_probes.py and _sph_bodies.py.)
 
 The model is DualSPHysics's: continuity density, Tait's equation of state, Monaghan's
 artificial or the laminar viscosity, optional delta-SPH (Molteni & Colagrossi 2009 or
