@@ -443,13 +443,16 @@ class WindTunnel(Kind):
 
     def header(self, sim) -> dict[str, Any]:
         p = sim.params
-        airfoil = {"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
-                   "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"]),
-                   "angle_of_attack": float(sim.scene.values["airfoil.angle_of_attack"]),
-                   # the control's pitch turns it (nose up: clockwise) about the quarter chord
-                   "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}
         if sim.info.get("body"):  # a 3-D body replaces the airfoil: its triangles
             airfoil = dict(sim.info["body"])
+        else:
+            airfoil = {"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
+                       "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"]),
+                       "angle_of_attack": float(sim.scene.values["airfoil.angle_of_attack"]),
+                       # the control's pitch turns it (nose up: clockwise) about the quarter chord
+                       "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}
+        if sim.info.get("body"):
+            pass
         elif self.dim == 3:
             # the section (x, y points) extruded along z across the whole (periodic) span
             airfoil["extrude"] = [float(p["channel_lo"][2]), float(p["channel_hi"][2])]

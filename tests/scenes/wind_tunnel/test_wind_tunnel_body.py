@@ -28,7 +28,8 @@ def _by_id(sim, name):
 def _scene(name="wind-tunnel-sphere", body=None):
     scene = load_scene(name)
     if body is not None:  # (an array override replaces the whole array, re-validated)
-        scene = scene.with_overrides({"bodies": [{**scene.arrays["bodies"][0], **body}]})
+        entry = {k: v for k, v in {**scene.arrays["bodies"][0], **body}.items() if v != ""}  # (no empty paths)
+        scene = scene.with_overrides({"bodies": [entry]})
     return scene
 
 
@@ -86,8 +87,10 @@ def test_no_centre_ever_inside(backend, body):
     touched = 0
     for _ in range(12):
         sim.step(25)
-        sd = _signed_distance(v, f, sim.field("position", copy=True))
-        assert sd.min() > -1e-5 * 0.3, sd.min()  # float32 rounding of the coordinates
+        x = sim.field("position", copy=True)
+        near = np.all((x > v.min(0) - sim.radius) & (x < v.max(0) + sim.radius), axis=1)  # (the rest: outside)
+        sd = _signed_distance(v, f, x[near])
+        assert near.any() and sd.min() > -1e-5 * 0.3, sd.min()  # float32 rounding of the coordinates
         touched += sim.state()["airfoil_contacts"]
     assert touched > 0
     assert not sim.state()["bad"]
@@ -198,7 +201,7 @@ def _sphere_check(particles, window, backend="cpu"):
 
 
 def test_sphere_drag_against_free_molecular_ci():
-    (c,) = _sphere_check(8000, 0.15)
+    (c,) = _sphere_check(20_000, 0.15)
     assert c.passed, c
     assert "pushouts 0" in c.detail
     # the tolerance is the sample noise's: it would not pass a theory 50 % off
@@ -207,5 +210,5 @@ def test_sphere_drag_against_free_molecular_ci():
 
 @pytest.mark.slow
 def test_sphere_drag_against_free_molecular_default():
-    (c,) = _sphere_check(20_000, 0.3)
+    (c,) = _sphere_check(40_000, 0.3)
     assert c.passed, c
