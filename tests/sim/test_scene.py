@@ -377,7 +377,7 @@ def test_unknown_scene():
         load_scene("foo")
     assert str(e.value) == ("unknown scene 'foo' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, "
                             "dam-break-obstacle, fluid-box, lid-driven-cavity, magic8ball, piston-wave-maker, poiseuille, "
-                            "taylor-green, wind-tunnel, wind-tunnel-3d)")
+                            "taylor-green, wind-tunnel, wind-tunnel-3d, wind-tunnel-sphere, wind-tunnel-wing)")
 
 
 def test_unknown_scene_did_you_mean():
