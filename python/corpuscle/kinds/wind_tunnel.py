@@ -514,8 +514,11 @@ class WindTunnel(Kind):
     def live_controls(self, sim) -> list[dict[str, Any]]:
         """The live page's sliders: the inflow speed and the angle of attack."""
         U, a = float(sim.info["speed"]), float(sim.scene.values["airfoil.angle_of_attack"])
-        return [{"control": "speed_scale", "label": "inflow speed", "unit": "m/s", "min": 0.1 * U, "max": 3.0 * U,
-                 "step": 0.01 * U, "value": U, "scale": 1.0 / U, "offset": -1.0},
+        speed = {"control": "speed_scale", "label": "inflow speed", "unit": "m/s", "min": 0.1 * U, "max": 3.0 * U,
+                 "step": 0.01 * U, "value": U, "scale": 1.0 / U, "offset": -1.0}
+        if sim.info.get("body"):  # a 3-D body does not pitch (the control turns the airfoil only)
+            return [speed]
+        return [speed,
                 {"control": "pitch", "label": "angle of attack", "unit": "°", "min": max(a - MAX_PITCH, -90.0),
                  "max": min(a + MAX_PITCH, 90.0), "step": 0.5, "value": a, "scale": 1.0, "offset": -a}]
 
