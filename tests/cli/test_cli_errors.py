@@ -38,7 +38,7 @@ def _dt_file(tmp_path):
 
 # (argv, text that the one error line must contain)
 CASES = [
-    (["run", "nosuchscene"], "unknown scene 'nosuchscene' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, dam-break-dsph-building, dam-break-obstacle, floating-box, floating-box-2d, fluid-box, lid-driven-cavity, magic8ball, piston-wave-maker, poiseuille, taylor-green, wind-tunnel, wind-tunnel-3d)"),
+    (["run", "nosuchscene"], "unknown scene 'nosuchscene' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, dam-break-dsph-building, dam-break-obstacle, floating-box, floating-box-2d, fluid-box, lid-driven-cavity, magic8ball, piston-wave-maker, poiseuille, taylor-green, wind-tunnel, wind-tunnel-3d, wind-tunnel-sphere, wind-tunnel-wing)"),
     (["run", "magic8ball", "--set", "fluid.stifness=2e4"], "unknown key 'fluid.stifness' (did you mean 'fluid.stiffness'?)"),
     (["run", "magic8ball", "--set", "fluid.particles=lots"], 'fluid.particles must be an integer in [200, 2000000], got "lots"'),
     (["run", "magic8ball", "--set", "sph.scale_h=1"], "sph.scale_h must be true or false, got 1"),

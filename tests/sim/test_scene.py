@@ -378,7 +378,7 @@ def test_unknown_scene():
     assert str(e.value) == ("unknown scene 'foo' (built-in scenes: dam-break, dam-break-2d, dam-break-dsph, dam-break-dsph-building, "
                             "dam-break-obstacle, floating-box, floating-box-2d, fluid-box, lid-driven-cavity, magic8ball, "
                             "piston-wave-maker, poiseuille, "
-                            "taylor-green, wind-tunnel, wind-tunnel-3d)")
+                            "taylor-green, wind-tunnel, wind-tunnel-3d, wind-tunnel-sphere, wind-tunnel-wing)")
 
 
 def test_unknown_scene_did_you_mean():

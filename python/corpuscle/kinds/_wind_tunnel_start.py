@@ -46,28 +46,43 @@ def signed_distance(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return np.where(_inside(poly, pts), -d, d)
 
 
-def start_spacing(n, radius, lo, hi, poly):
+def start_spacing(n, radius, lo, hi, poly, body=None):
     """The start lattice's extent (a radius off the walls; the whole periodic span in 3-D)
-    and spacing: n sites and 10% more over the free area (x-y, less the section) or volume."""
+    and spacing: n sites and 10% more over the free area (x-y, less the section) or volume
+    (less a 3-D body's, _wind_tunnel_body.WindBody; poly None: no airfoil)."""
     ext = hi - lo - 2 * radius
     if len(lo) == 3:
         ext[2] = hi[2] - lo[2]  # the periodic span: no wall to keep clear of
-    free = float(np.prod(ext[:2])) - abs(airfoils.signed_area(poly))
-    a = math.sqrt(free / (n * 1.1)) if len(lo) == 2 else (free * ext[2] / (n * 1.1)) ** (1 / 3)
+    free = float(np.prod(ext[:2])) - (abs(airfoils.signed_area(poly)) if poly is not None else 0.0)
+    if len(lo) == 2:
+        a = math.sqrt(free / (n * 1.1))
+    else:
+        a = (max(free * ext[2] - (body.volume if body is not None else 0.0), 1e-300) / (n * 1.1)) ** (1 / 3)
     return ext, a
 
-def place(n, radius, lo, hi, poly, params, seed):
+
+def keep_clear(pts, poly, clearance, body=None):
+    """Which points lie farther than clearance from the airfoil section (x-y; poly None: no
+    airfoil) and from a 3-D body (its signed distance)."""
+    keep = clear(pts[:, :2], poly, clearance) if poly is not None else np.ones(len(pts), dtype=bool)
+    if body is not None:
+        near = np.all((pts > body.lo - clearance) & (pts < body.hi + clearance), axis=1) & keep
+        if near.any():
+            keep[near] = body.signed_distance(pts[near]) > clearance
+    return keep
+
+def place(n, radius, lo, hi, poly, params, seed, body=None):
     """A jittered square lattice over the channel, a radius clear of the walls and the
     airfoil, n of its sites drawn at random; velocities are the free stream. A
     collisionless gas (contact.enabled = false) is a uniform random (Poisson) gas instead:
     its particles may overlap."""
     rng = np.random.default_rng(seed)
     if not params.get("collide", 1):
-        return place_uniform(n, radius, lo, hi, poly, params, rng)
+        return place_uniform(n, radius, lo, hi, poly, params, rng, body)
     if params.get("conv_rows", 0):
-        return place_conveyor(n, radius, lo, hi, poly, params, rng)
+        return place_conveyor(n, radius, lo, hi, poly, params, rng, body)
     d = len(lo)
-    ext, a = start_spacing(n, radius, lo, hi, poly)
+    ext, a = start_spacing(n, radius, lo, hi, poly, body)
     if a <= 2 * radius * 1.0001:
         raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
                          f"(lattice spacing {a:.3g} m < a diameter)")
@@ -82,17 +97,14 @@ def place(n, radius, lo, hi, poly, params, seed):
         pts = np.column_stack([g.ravel() for g in grids])
         gap = min(ext[k] / counts[k] for k in range(d))
         pts += rng.uniform(-1, 1, pts.shape) * 0.45 * (gap - 2 * radius)
-        box_lo, box_hi = poly.min(axis=0) - 2 * radius, poly.max(axis=0) + 2 * radius
-        near = np.all((pts[:, :2] > box_lo) & (pts[:, :2] < box_hi), axis=1)
-        keep = np.ones(len(pts), dtype=bool)
-        if near.any():  # the airfoil section (extruded along z in 3-D): the x-y distance
-            keep[near] = signed_distance(poly, pts[near][:, :2]) > 1.05 * radius
-        pts = pts[keep]
+        # the airfoil section (extruded along z in 3-D: the x-y distance) or the 3-D body
+        pts = pts[keep_clear(pts, poly, 1.05 * radius, body)]
         if len(pts) >= n:
             break
         a *= 0.97
         if a <= 2 * radius * 1.0001:
-            raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit around the airfoil")
+            raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit around the "
+                             f"{'body' if body is not None else 'airfoil'}")
     pick = np.sort(rng.choice(len(pts), size=n, replace=False))
     pos = pts[pick]
     U = params["speed"]
@@ -122,14 +134,14 @@ def conveyor_slots(radius, lo, hi, c):
     pts = np.column_stack(cols)
     return pts[x < hi[0]]
 
-def conveyor(n, radius, lo, hi, poly) -> dict:
+def conveyor(n, radius, lo, hi, poly, body=None) -> dict:
     """The inflow conveyor of a cold beam with contacts: the start lattice's rows and
     spacing (n sites and 10% more over the free area or volume, as the random start had),
     so the stream that enters later is the lattice the run starts from. Deterministic (no
     random numbers): a resumed run rebuilds the same one. More rows than the core holds
     (stages.h kMaxRows): no conveyor (re-entry at random heights)."""
     d = len(lo)
-    ext, a = start_spacing(n, radius, lo, hi, poly)
+    ext, a = start_spacing(n, radius, lo, hi, poly, body)
     while True:
         if a <= 2 * radius * 1.0001:
             raise SceneError(f"gas.particles = {n} of radius {radius:.3g} m do not fit in the channel "
@@ -146,7 +158,9 @@ def conveyor(n, radius, lo, hi, poly) -> dict:
             pts = conveyor_slots(radius, lo, hi, c)
             gaps = [a - 2 * radius, c["conv_dy"] - 2 * radius] + ([c["conv_dz"] - 2 * radius] if d == 3 else [])
             jitter = 0.45 * math.hypot(gaps[0], gaps[1])  # in x-y, where the airfoil is
-            if len(pts) >= n and np.count_nonzero(clear(pts[:, :2], poly, 1.05 * radius + jitter)) >= n:
+            if body is not None:  # the jitter in 3-D
+                jitter = 0.45 * math.sqrt(sum(g * g for g in gaps))
+            if len(pts) >= n and np.count_nonzero(keep_clear(pts, poly, 1.05 * radius + jitter, body)) >= n:
                 return c
         a *= 0.97
 
@@ -158,7 +172,7 @@ def clear(pts, poly, clearance):
         keep[near] = signed_distance(poly, pts[near]) > clearance
     return keep
 
-def place_conveyor(n, radius, lo, hi, poly, params, rng):
+def place_conveyor(n, radius, lo, hi, poly, params, rng, body=None):
     """The start as the conveyor's lattice (see _conveyor): its slots jittered as the entering
     ones are, those 1.05 radii clear of the airfoil kept, n of them drawn at random."""
     d = len(lo)
@@ -172,14 +186,14 @@ def place_conveyor(n, radius, lo, hi, poly, params, rng):
     pts[:, 0] = np.minimum(pts[:, 0], float(np.nextafter(np.float32(hi[0]), np.float32(-np.inf))))  # (float32)
     if d == 3:  # the periodic span
         pts[:, 2] = lo[2] + np.mod(pts[:, 2] - lo[2], hi[2] - lo[2])
-    pts = pts[clear(pts[:, :2], poly, 1.05 * radius)]  # (_conveyor made sure n of them are)
+    pts = pts[keep_clear(pts, poly, 1.05 * radius, body)]  # (_conveyor made sure n of them are)
     pick = np.sort(rng.choice(len(pts), size=n, replace=False))
     pos = pts[pick]
     vel = np.zeros_like(pos)
     vel[:, 0] = params["speed"]
     return np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(vel, dtype=np.float32)
 
-def place_uniform(n, radius, lo, hi, poly, params, rng):
+def place_uniform(n, radius, lo, hi, poly, params, rng, body=None):
     d = len(lo)
     pts = np.empty((0, d))
     # a radius off the walls; from the inflow to the outflow in x, as the stream fills it
@@ -188,14 +202,9 @@ def place_uniform(n, radius, lo, hi, poly, params, rng):
     off = np.zeros(d)
     off[1] = radius
     a, b = lo + off, hi - off
-    box_lo, box_hi = poly.min(axis=0) - radius, poly.max(axis=0) + radius
     while len(pts) < n:
         p = rng.uniform(a, b, (int(1.2 * (n - len(pts))) + 16, d))
-        near = np.all((p[:, :2] > box_lo) & (p[:, :2] < box_hi), axis=1)
-        keep = np.ones(len(p), dtype=bool)
-        if near.any():
-            keep[near] = signed_distance(poly, p[near][:, :2]) > radius
-        pts = np.concatenate([pts, p[keep]])
+        pts = np.concatenate([pts, p[keep_clear(p, poly, radius, body)]])
     pos = pts[:n]
     U = params["speed"]
     sigma = params["thermal"] * U

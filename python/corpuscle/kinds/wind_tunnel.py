@@ -30,6 +30,7 @@ import numpy as np
 from .. import airfoils
 from ..schema import INT64_MAX, KeySpec, SceneError, SceneKind, _fmt_value, check_le
 from . import Build, Kind, Target, check_memory, core, key_values
+from . import _wind_tunnel_body
 from ._wind_tunnel_start import KMAX_ROWS, conveyor, place, signed_distance  # noqa: F401  (public here)
 
 __all__ = ["KIND", "WindTunnel", "WIND_TUNNEL_KEYS", "DEFAULT_PARTICLES", "restitution", "damping",
@@ -164,7 +165,10 @@ def keys_3d(defaults: dict[str, int], end_time: float, span: float) -> dict[str,
 
 def _channel_room(values: dict[str, Any], arrays) -> None:
     """The placed airfoil (chord, angle of attack and leading edge applied: what the run
-    builds) lies inside the channel; the 3-D kind's section spans z, so x and y decide."""
+    builds) lies inside the channel; the 3-D kind's section spans z, so x and y decide. A
+    3-D body replaces the airfoil (its own check: _wind_tunnel_body.check_body)."""
+    if arrays and arrays.get("bodies"):
+        return
     L, H = float(values["channel.length"]), float(values["channel.height"])
     poly = airfoil_polygon(values)
     lo, hi = poly.min(axis=0), poly.max(axis=0)
@@ -228,11 +232,14 @@ def airfoil_polygon(values: dict[str, Any]) -> np.ndarray:
                           tuple(values["airfoil.leading_edge"]))
 
 
-def coefficients(values: dict[str, float], rho: float, U: float, chord: float) -> dict[str, float]:
-    """C_L, C_D, C_M from lift, drag, moment (per span) and the free stream."""
+def coefficients(values: dict[str, float], rho: float, U: float, chord: float,
+                 area: float | None = None) -> dict[str, float]:
+    """C_L, C_D, C_M from lift, drag, moment and the free stream: per span over the chord, or
+    (a 3-D body) the whole body's over its reference ``area`` (and length ``chord``)."""
     q = 0.5 * rho * U * U
-    return {"cl": values["lift"] / (q * chord), "cd": values["drag"] / (q * chord),
-            "cm": values["moment"] / (q * chord * chord)}
+    area = chord if area is None else area
+    return {"cl": values["lift"] / (q * area), "cd": values["drag"] / (q * area),
+            "cm": values["moment"] / (q * area * chord)}
 
 
 # ---------------------------------------------------------------------------
@@ -286,15 +293,17 @@ class WindTunnel(Kind):
         n = int(v["gas.particles"]) or self.default_particles.get(target.backend, self.default_particles["cpu"])
         L, H = float(v["channel.length"]), float(v["channel.height"])
         lo, hi = np.array([-L / 2, -H / 2]), np.array([L / 2, H / 2])
-        poly = airfoil_polygon(v)
-        free_area = L * H - abs(airfoils.signed_area(poly))
+        # a 3-D [[bodies]] entry replaces the airfoil (_wind_tunnel_body.py)
+        body = _wind_tunnel_body.build_body(v, scene.arrays) if d == 3 else None
+        poly = airfoil_polygon(v) if body is None else None
+        free_area = L * H - (abs(airfoils.signed_area(poly)) if poly is not None else 0.0)
         if d == 2:
             radius = float(v["gas.radius"]) or math.sqrt(float(v["gas.solid_fraction"]) * free_area / (math.pi * n))
             free = free_area  # the free area (2-D) or volume (3-D)
         else:
             B = self.span(v)
             lo, hi = np.array([-L / 2, -H / 2, -B / 2]), np.array([L / 2, H / 2, B / 2])
-            free = free_area * B
+            free = free_area * B - (body.volume if body is not None else 0.0)
             radius = float(v["gas.radius"]) or (3.0 * float(v["gas.solid_fraction"]) * free / (4.0 * math.pi * n)) ** (1 / 3)
             if not B >= 4 * radius * (1 + 2e-4):
                 given = (f"gas.radius = {radius:g} m" if v["gas.radius"] else
@@ -313,10 +322,10 @@ class WindTunnel(Kind):
         for key, m_eff in (("contact", m / 2), ("wall", m), ("wing", m)):
             k, c, e = float(v[f"{key}.k"]), float(v[f"{key}.c"]), float(v[f"{key}.restitution"])
             laws[key] = (k, damping(k, e, m_eff) if e > 0 else c)
-        chord = float(v["airfoil.chord"])
+        chord = float(v["airfoil.chord"]) if body is None else body.reference_length
         a = math.radians(float(v["airfoil.angle_of_attack"]))
         le = np.asarray(v["airfoil.leading_edge"], dtype=np.float64)
-        quarter = le + 0.25 * chord * np.array([math.cos(a), -math.sin(a)])
+        quarter = le + 0.25 * chord * np.array([math.cos(a), -math.sin(a)]) if body is None else body.centroid[:2]
         end = float(v["run.end_time"])
         t0 = float(v["measure.start"]) * end
         block = float(v["measure.block_time"]) or max((end - t0) / 64.0, 1e-9)
@@ -336,13 +345,13 @@ class WindTunnel(Kind):
             "block_time": block, "seed": int(v["run.seed"]) & 0xFFFFFFFF,
         }
         if params["collide"] and params["thermal"] == 0.0 and v["inflow.lattice"]:
-            params.update(conveyor(n, radius, lo, hi, poly))
+            params.update(conveyor(n, radius, lo, hi, poly, body))
         check_memory(self.name, target, params, key_values(scene, ("gas.particles", "gas.radius", "grid.cell")),
                      f"{n} particles")
-        if len(poly) > 1024:
+        if poly is not None and len(poly) > 1024:
             raise SceneError(f"airfoil.shape: {len(poly)} vertices, at most 1024")
         if checkpoint is None:
-            pos, vel = place(n, radius, lo, hi, poly, params, int(v["run.seed"]))
+            pos, vel = place(n, radius, lo, hi, poly, params, int(v["run.seed"]), body)
         else:
             pos = np.ascontiguousarray(checkpoint["position"], dtype=np.float32)
             vel = np.ascontiguousarray(checkpoint["velocity"], dtype=np.float32)
@@ -356,12 +365,19 @@ class WindTunnel(Kind):
                 "restitution_wing": restitution(laws["wing"][0], laws["wing"][1], m)}
         if d == 3:
             info.update(span=self.span(v), free_volume=free)  # the free volume's section: free_area
-        arrays = {"position": pos, "velocity": vel, "airfoil": np.ascontiguousarray(poly, dtype=np.float32)}
+        arrays = {"position": pos, "velocity": vel}
+        if body is None:
+            arrays["airfoil"] = np.ascontiguousarray(poly, dtype=np.float32)
+        else:  # forces are the whole body's; C_L, C_D, C_M on its reference area and length
+            arrays.update(_wind_tunnel_body.core_arrays(body))
+            info.update(body=_wind_tunnel_body.header_obstacle(body), reference_area=body.reference_area,
+                        body_volume=body.volume, torque_about=body.centroid.tolist())
         return Build(params, arrays, info)
 
     def state(self, sim, s: dict[str, Any]) -> dict[str, Any]:
         f = s["airfoil_force"]
-        b = float(sim.info["span"]) if self.dim == 3 else None  # lift, drag, moment per unit span
+        # lift, drag, moment per unit span (a 3-D body's: the whole body's)
+        b = float(sim.info["span"]) if self.dim == 3 and not sim.info.get("body") else None
         per = (lambda x: float(x) / b) if b else float
         return {"time": s["time"], "end_time": s["end_time"], "step": s["step"], "dt": s["dt"],
                 "done": bool(s["done"]), "bad": s["bad"], "bad_step": s["bad_step"],
@@ -369,7 +385,9 @@ class WindTunnel(Kind):
                 "airfoil_contacts": int(s["airfoil_contacts"]), "wall_force": list(s["wall_force"]),
                 "total_force": list(s["total_force"]), "kinetic_energy": float(s["sums_ke"]),
                 "vmax": float(s["vmax"]), "recycled": int(s["recycled"]), "pushouts": int(s["pushouts"]),
-                "chosen_dt": float(s["chosen_dt"])}
+                "chosen_dt": float(s["chosen_dt"]),
+                **({"side_force": float(f[2]), "torque": [float(x) for x in s["body_torque"]]}
+                   if sim.info.get("body") else {})}
 
     def diagnostics(self, sim, s: dict[str, Any]) -> dict[str, float]:
         st = self.state(sim, s)
@@ -382,11 +400,12 @@ class WindTunnel(Kind):
         means: the blocks are long against the force's correlation time)."""
         nb = int(s["nblocks"])
         out: dict[str, Any] = {"blocks": nb, "block_time": float(s["block_len"])}
-        span = float(sim.info["span"]) if self.dim == 3 else 1.0  # per unit span (3-D: the whole span's / span)
+        # per unit span (3-D: the whole span's / span; a 3-D body: the whole body's)
+        span = float(sim.info["span"]) if self.dim == 3 and not sim.info.get("body") else 1.0
         touched = False
         for name, key in (("lift", "blocks_lift"), ("drag", "blocks_drag"), ("moment", "blocks_moment")):
             b = np.asarray(s[key], dtype=np.float64)[:nb]
-            if self.dim == 3:
+            if span != 1.0:
                 b = b / span
             touched = touched or bool(np.any(b != 0.0))
             out[name] = float(b.mean()) if nb else float("nan")
@@ -395,7 +414,7 @@ class WindTunnel(Kind):
         t0 = float(sim.info["measure_start"])
         out["not_measured"] = (f"the run ended before the measurement window at t = {t0:.4g} s" if not nb else
                                None if touched else
-                               f"no particle touched the airfoil in the measurement window from t = {t0:.4g} s: "
+                               f"no particle touched the {'body' if sim.info.get('body') else 'airfoil'} in the measurement window from t = {t0:.4g} s: "
                                f"its force was exactly 0 in every block")
         if out["not_measured"]:
             for name in ("lift", "drag", "moment"):
@@ -405,12 +424,15 @@ class WindTunnel(Kind):
     def result(self, sim, s: dict[str, Any]) -> dict[str, Any]:
         av = self.averages(sim, s)
         U, c, rho = sim.info["speed"], sim.info["chord"], sim.info["density"]
-        co = coefficients(av, rho, U, c)
+        # the reference area: the chord (per unit span) or a 3-D body's reference area
+        area = float(sim.info.get("reference_area") or c)
+        co = coefficients(av, rho, U, c, area)
         q = 0.5 * rho * U * U
         out = {"lift": av["lift"], "drag": av["drag"], "moment": av["moment"],
                "lift_se": av["lift_se"], "drag_se": av["drag_se"], "moment_se": av["moment_se"],
                "cl": co["cl"], "cd": co["cd"], "cm": co["cm"],
-               "cl_se": av["lift_se"] / (q * c), "cd_se": av["drag_se"] / (q * c), "cm_se": av["moment_se"] / (q * c * c),
+               "cl_se": av["lift_se"] / (q * area), "cd_se": av["drag_se"] / (q * area),
+               "cm_se": av["moment_se"] / (q * area * c),
                "blocks": av["blocks"], "measure_start": sim.info["measure_start"],
                **({"not_measured": av["not_measured"]} if av["not_measured"] else {}),
                "recycled": int(s["recycled"]), "pushouts": int(s["pushouts"])}
@@ -421,12 +443,17 @@ class WindTunnel(Kind):
 
     def header(self, sim) -> dict[str, Any]:
         p = sim.params
-        airfoil = {"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
-                   "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"]),
-                   "angle_of_attack": float(sim.scene.values["airfoil.angle_of_attack"]),
-                   # the control's pitch turns it (nose up: clockwise) about the quarter chord
-                   "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}
-        if self.dim == 3:
+        if sim.info.get("body"):  # a 3-D body replaces the airfoil: its triangles
+            airfoil = dict(sim.info["body"])
+        else:
+            airfoil = {"type": "polygon", "name": "airfoil", "points": sim.info["airfoil"].tolist(),
+                       "chord": sim.info["chord"], "file": str(sim.scene.values["airfoil.shape"]),
+                       "angle_of_attack": float(sim.scene.values["airfoil.angle_of_attack"]),
+                       # the control's pitch turns it (nose up: clockwise) about the quarter chord
+                       "turn": {"diagnostic": "pitch", "about": list(p["quarter_chord"]), "sign": -1.0}}
+        if sim.info.get("body"):
+            pass
+        elif self.dim == 3:
             # the section (x, y points) extruded along z across the whole (periodic) span
             airfoil["extrude"] = [float(p["channel_lo"][2]), float(p["channel_hi"][2])]
             airfoil["periodic"] = [False, False, True]
@@ -435,7 +462,14 @@ class WindTunnel(Kind):
                 "obstacles": [airfoil], **extra,
                 "bodies": [], "particles": sim.n_particles, "particle_radius": sim.info["radius"],
                 "mass": sim.info["mass"], "free_stream": [p["speed"]] + [0.0] * (self.dim - 1),
-                "units": dict(self.units), "render": self.render_defaults(sim)}
+                "units": self.units_of(sim), "render": self.render_defaults(sim)}
+
+    def units_of(self, sim) -> dict[str, str]:
+        """The units of the run's values: a 3-D body's forces are the whole body's (N, N m)."""
+        u = dict(self.units)
+        if sim.info.get("body"):
+            u.update(lift="N", drag="N", moment="N·m", side_force="N", torque="N·m")
+        return u
 
     def render_defaults(self, sim) -> dict[str, Any]:
         """How render and the live viewer colour this kind by default: the number density on a
@@ -480,8 +514,11 @@ class WindTunnel(Kind):
     def live_controls(self, sim) -> list[dict[str, Any]]:
         """The live page's sliders: the inflow speed and the angle of attack."""
         U, a = float(sim.info["speed"]), float(sim.scene.values["airfoil.angle_of_attack"])
-        return [{"control": "speed_scale", "label": "inflow speed", "unit": "m/s", "min": 0.1 * U, "max": 3.0 * U,
-                 "step": 0.01 * U, "value": U, "scale": 1.0 / U, "offset": -1.0},
+        speed = {"control": "speed_scale", "label": "inflow speed", "unit": "m/s", "min": 0.1 * U, "max": 3.0 * U,
+                 "step": 0.01 * U, "value": U, "scale": 1.0 / U, "offset": -1.0}
+        if sim.info.get("body"):  # a 3-D body does not pitch (the control turns the airfoil only)
+            return [speed]
+        return [speed,
                 {"control": "pitch", "label": "angle of attack", "unit": "°", "min": max(a - MAX_PITCH, -90.0),
                  "max": min(a + MAX_PITCH, 90.0), "step": 0.5, "value": a, "scale": 1.0, "offset": -a}]
 

@@ -14,11 +14,18 @@ normal), so the z velocity of a particle is untouched by it.
 Forces are reported per unit span (lift, drag: N/m; moment about the quarter-chord line: N),
 and C_L, C_D, C_M use the free stream's mass density per volume, rho = N m / free volume:
 C_L = L' / (rho U^2 c / 2), L' the lift per unit span (the whole span's lift / span).
+
+A ``[[bodies]]`` entry (a closed mesh from an STL/OBJ/PLY file, or a primitive) replaces the
+airfoil (:mod:`corpuscle.kinds._wind_tunnel_body`): its triangles are held in the engine's LBVH
+and touched by signed distance; its forces are the whole body's (N), its moment about the z
+axis through its centroid (N m), and C_L, C_D, C_M use its reference area and length.
 """
 
 from __future__ import annotations
 
+from ..geometry import body_keys
 from ..schema import SceneKind
+from ._wind_tunnel_body import BODY_KEYS, MAX_BODIES, check_body
 from .wind_tunnel import WindTunnel, _channel_room, _one_thermal, keys_3d
 
 __all__ = ["KIND", "WindTunnel3D", "DEFAULT_PARTICLES", "WIND_TUNNEL_3D_KEYS"]
@@ -29,13 +36,17 @@ DEFAULT_PARTICLES = {"cuda": 2_097_152, "cpu": 8_192, "serial": 8_192}
 END_TIME = 10.0  # s: the default run (about 10,000 steps at dt_max)
 SPAN = 0.25  # m: half a chord (the span only needs to exceed the flow's correlation lengths)
 
-WIND_TUNNEL_3D_KEYS = keys_3d(DEFAULT_PARTICLES, END_TIME, SPAN)
+WIND_TUNNEL_3D_KEYS = {**keys_3d(DEFAULT_PARTICLES, END_TIME, SPAN), **BODY_KEYS}
 
 SCHEMA = SceneKind(
     name="wind-tunnel-3d",
     description="3-D soft-sphere gas past an airfoil spanning a periodic channel: lift, drag and moment per span",
     keys=WIND_TUNNEL_3D_KEYS,
-    checks=[_channel_room, _one_thermal],
+    # [[bodies]]: one closed, fixed body (a mesh or a primitive) in place of the airfoil
+    arrays={"bodies": body_keys(3)},
+    required_in_arrays={"bodies": ("shape",)},
+    max_in_arrays={"bodies": MAX_BODIES},
+    checks=[_channel_room, _one_thermal, check_body],
 )
 
 

@@ -35,6 +35,7 @@ class Check:
 
 # CLI name -> module of this package
 VALIDATIONS = {"dam-break": "dam_break", "hydrostatic": "hydrostatic", "wind-tunnel": "wind_tunnel",
+               "wind-tunnel-sphere": "wind_tunnel_sphere",  # a mesh body's drag, free-molecular
                # the canonical flows (periodic boundaries, moving walls: docs/sph_box.md)
                "taylor-green": "taylor_green", "poiseuille": "poiseuille", "lid-driven-cavity": "lid_driven_cavity"}
 

@@ -174,9 +174,10 @@
       if (ob.turn && typeof ob.turn === 'object' && Array.isArray(ob.turn.about)) {
         o.turn = { diagnostic: String(ob.turn.diagnostic || ''), about: pad3(ob.turn.about), sign: +(ob.turn.sign ?? 1) };
       }
-      // a moving 2-D body (the SPH box kinds): its points at t = 0 about `origin`, turned by `rotation`
-      if (ob.pose && typeof ob.pose === 'object' && Array.isArray(ob.pose.origin) && ob.pose.origin.length === 2 &&
-          Array.isArray(ob.pose.rotation) && ob.pose.rotation.length === 2) {
+      // a moving body (the SPH box kinds; 2-D or 3-D): its points at t = 0 about `origin`, turned by `rotation`
+      if (ob.pose && typeof ob.pose === 'object' && Array.isArray(ob.pose.origin) &&
+          (ob.pose.origin.length === 2 || ob.pose.origin.length === 3) &&
+          Array.isArray(ob.pose.rotation) && ob.pose.rotation.length === ob.pose.origin.length) {
         o.pose = { diagnostic: String(ob.pose.diagnostic || ''), origin: ob.pose.origin.map(Number), R0: ob.pose.rotation.map((r) => r.map(Number)) };
       }
       if (Array.isArray(ob.points) && ob.points.length >= 2 && Array.isArray(ob.extrude) && ob.extrude.length === 2 && S.dim === 3) {
@@ -220,6 +221,21 @@
   function turned(o, data) {
     if (o.pose && data.length) {  // at the frame's pose: c + R R0^T (p - c0)
       const D = S.frame && S.frame.meta.diagnostics ? S.frame.meta.diagnostics : {}, n = o.pose.diagnostic;
+      const fin = (v) => v !== null && v !== undefined && isFinite(v);
+      if (o.pose.origin.length === 3) {  // 3-D: the frame's centre (_x, _y, _z) and rotation (_r00 .. _r22)
+        const C = ['x', 'y', 'z'].map((a) => D[n + '_' + a]);
+        const R = [0, 1, 2].map((r) => [0, 1, 2].map((q) => D[n + '_r' + r + q]));
+        if (C.every(fin) && R.every((row) => row.every(fin))) {
+          const [ox, oy, oz] = o.pose.origin, R0 = o.pose.R0, out = new Float32Array(data.length);
+          for (let i = 0; i < data.length; i += 3) {
+            const x = data[i] - ox, y = data[i + 1] - oy, z = data[i + 2] - oz;
+            const l = [0, 1, 2].map((k) => R0[0][k] * x + R0[1][k] * y + R0[2][k] * z);  // R0^T (p - c0)
+            for (let k = 0; k < 3; k++) out[i + k] = C[k] + R[k][0] * l[0] + R[k][1] * l[1] + R[k][2] * l[2];
+          }
+          return out;
+        }
+        return data;
+      }
       const cx = D[n + '_x'], cy = D[n + '_y'], an = D[n + '_angle'];
       if ([cx, cy, an].every((v) => v !== null && v !== undefined && isFinite(v))) {
         const a = an * Math.PI / 180, c = Math.cos(a), s = Math.sin(a), [ox, oy] = o.pose.origin, R0 = o.pose.R0;

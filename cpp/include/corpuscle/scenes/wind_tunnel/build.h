@@ -9,6 +9,7 @@
 
 #include "corpuscle/core/error.h"
 #include "corpuscle/dem/build.h"
+#include "corpuscle/physics/triangle_mesh.h"
 #include "corpuscle/sim/kind_list.h"
 #include "corpuscle/sim/params.h"
 #include "corpuscle/sim/sim_impl.h"
@@ -23,6 +24,41 @@ inline Vec<D> vecd(const ParamSource& p, const std::string& key, const std::stri
   Vec<D> r;
   for (int k = 0; k < D; ++k) r[k] = float(v[k]);
   return r;
+}
+
+// D = 3: the mesh body's triangle records (physics/triangle_mesh.h) from the arrays body_vertices
+// (nv, 3; world coordinates) and body_faces (nf, 3; vertex numbers), and their box and centroid
+// (the torque's reference point); none: no body. A mesh that is not closed and consistently
+// oriented is refused (its fault named)
+template <int D>
+inline int body_records(const ArraySource* arrays, const std::string& kind, std::vector<float>& rec, float lo[3],
+                        float hi[3], Vec3& ref) {
+  if (!arrays || !arrays->has("body_vertices")) return 0;
+  if (D != 3) throw Error(kind + ": a mesh body needs the 3-D tunnel (wind-tunnel-3d)");
+  if (!arrays->has("body_faces")) throw Error(kind + ": body_vertices without body_faces");
+  const ArrayView v = arrays->get("body_vertices"), f = arrays->get("body_faces");
+  if (v.components != 3 || f.components != 3 || v.count < 4 || f.count < 4)
+    throw Error(kind + ": the body's vertices and faces must be (n >= 4, 3)");
+  if (v.count >= (1LL << 24)) throw Error(kind + ": the body has too many vertices (at most 2^24)");
+  std::vector<double> V(size_t(3 * v.count));
+  std::vector<int64_t> F(size_t(3 * f.count));
+  for (size_t i = 0; i < V.size(); ++i) V[i] = double(v.data[i]);
+  for (size_t i = 0; i < F.size(); ++i) F[i] = int64_t(f.data[i]);
+  const std::string bad = write_triangle_records(V.data(), v.count, F.data(), f.count, rec);
+  if (!bad.empty()) throw Error(kind + ": the body's mesh: " + bad);
+  double c[3] = {0, 0, 0};
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = 3e38f;
+    hi[k] = -3e38f;
+  }
+  for (long long i = 0; i < v.count; ++i)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::fmin(lo[k], v.data[3 * i + k]);
+      hi[k] = std::fmax(hi[k], v.data[3 * i + k]);
+      c[k] += double(v.data[3 * i + k]);
+    }
+  for (int k = 0; k < 3; ++k) ref[k] = float(c[k] / double(v.count));
+  return int(f.count);
 }
 
 // the model; the airfoil polygon (counter-clockwise vertices, (n, 2)) comes as an array
@@ -79,6 +115,9 @@ inline Model<D> build_model(const ParamSource& p, const ArraySource* arrays) {
     m.n_edges = int(a.count);
     m.bbox = polygon_bbox(P);
   }
+  std::vector<float> rec;  // (the records themselves are the pipeline's: make_with)
+  m.n_tris = body_records<D>(arrays, kind, rec, m.body_lo, m.body_hi, m.body_ref);
+  m.body_host = nullptr;
   return m;
 }
 
@@ -87,6 +126,14 @@ std::unique_ptr<Sim> make_with(Exec&& ex, const SimRequest& r) {
   using P = Pipeline<std::decay_t<Exec>, Index, D>;
   const std::string kind = kind_name<D>();
   auto m = std::make_unique<Model<D>>(build_model<D>(*r.params, r.arrays));  // 32 KiB: not on the stack
+  // the mesh body's records, read by the pipeline's constructor (it builds their tree)
+  std::vector<float> body;
+  if (m->n_tris > 0) {
+    float lo[3], hi[3];
+    Vec3 ref;
+    body_records<D>(r.arrays, kind, body, lo, hi, ref);
+    m->body_host = body.data();
+  }
   auto sim = std::make_unique<SimImpl<std::decay_t<Exec>, P>>(std::move(ex), *m, std::vector<typename P::SceneRecord>{P::initial_record(*m)},
                                                               r.device);
   for (const char* name : {"position", "velocity"}) {

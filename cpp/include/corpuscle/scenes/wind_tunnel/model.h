@@ -14,6 +14,7 @@
 // Model (constant), Scene (the per-scene record: clock, diagnostics, the block averages),
 // Control (the input of the next step) and Arrays (structure of arrays) are plain data.
 #pragma once
+#include "corpuscle/dem/mesh_body.h"
 #include "corpuscle/dem/model.h"
 #include "corpuscle/physics/dem.h"
 #include "corpuscle/physics/polygon.h"
@@ -59,6 +60,15 @@ struct Model : dem::SoftSpheres<D> {
   Box2 bbox;             // of the airfoil (in x-y)
   float edges[kEdgeStride * kMaxEdges];  // polygon edge records (polygon.h)
   PolygonGridCells foil_cells;  // the edges' grid (polygon_grid.h; its tables: the pipeline's buffers)
+  // D = 3: a fixed body from a closed triangle mesh (a `[[bodies]]` entry), its triangles held
+  // in the engine's LBVH (dem/mesh_body.h: built once by the pipeline's constructor from the
+  // host records body_host, which only that constructor reads); contact by signed distance
+  // with the law `wing`, its reaction summed as the airfoil's (force; moment about body_ref)
+  int n_tris;               // 0: no body
+  const float* body_host;   // the host triangle records (physics/triangle.h), construction only
+  float body_lo[3], body_hi[3];  // the mesh's box
+  Vec3 body_ref;            // the torque's reference point (the body's centroid)
+  MeshTreeView body;        // the queries (device pointers)
   CPS_HD PolygonEdges airfoil() const { return PolygonEdges{edges, n_edges}; }
   // the airfoil through its grid: the contact and push-out queries (the same hits as airfoil())
   CPS_HD PolygonGrid airfoil_grid() const { return PolygonGrid{airfoil(), foil_cells}; }
@@ -74,12 +84,14 @@ struct StepSums {
   float moment;      // on the airfoil about the quarter chord (counter-clockwise = nose up; about z)
   Vec<D> wall_force;   // the walls' forces on the particles
   Vec<D> total_force;  // every contact force on the particles (pairs cancel)
-  int contacts;      // particles touching the airfoil
+  Vec3 torque;       // D = 3: on the mesh body about its reference point (0 without one)
+  int contacts;      // particles touching the airfoil (or the mesh body)
 
   CPS_HD static StepSums identity() {
     StepSums s;
     s.vmax2 = s.ke = s.moment = 0.0f;
     s.force = s.wall_force = s.total_force = Vec<D>::zero();
+    s.torque = Vec3::zero();
     s.contacts = 0;
     return s;
   }
@@ -91,6 +103,7 @@ struct StepSums {
     s.moment = a.moment + b.moment;
     s.wall_force = a.wall_force + b.wall_force;
     s.total_force = a.total_force + b.total_force;
+    s.torque = a.torque + b.torque;
     s.contacts = a.contacts + b.contacts;
     return s;
   }

@@ -13,6 +13,7 @@
 // `wind-tunnel-3d` (model.h).
 #pragma once
 #include <cmath>
+#include <memory>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -82,6 +83,16 @@ class Pipeline {
       ex_.to_device(foil_flag_.data(), t.flag.data(), t.flag.size());
       m_.foil_cells = t.view(foil_start_.data(), foil_refs_.data(), foil_flag_.data());
     }
+    if constexpr (D == 3) {
+      if (m_.n_tris > 0) {
+        // the mesh body's triangle tree, built once (dem/mesh_body.h); a query that would
+        // overflow its stack makes the run unsound, as the particle tree's
+        if (!m_.body_host) throw Error(std::string(kind) + ": the mesh body's triangles were not given");
+        body_tree_ = std::make_unique<MeshTree<Exec>>(ex_, m_.body_host, m_.n_tris, m_.body_lo, m_.body_hi);
+        m_.body = body_tree_->view(&g_->clock.bad, kBadTraversal);
+      }
+    }
+    m_.body_host = nullptr;
     model_.resize(1);
     ex_.to_device(model_.data(), &m_, sizeof(Model));
     fields_.resize(size_t(n));
@@ -171,9 +182,11 @@ class Pipeline {
     const float me = effective_mass(m_.mass, m_.mass), mw = effective_mass(m_.mass, 0.0f);
     double lift = double(r.sums.force[1]), drag = double(r.sums.force[0]);
     if constexpr (D == 3) {
-      const double span = double(m_.hi[2]) - double(m_.lo[2]);
-      lift /= span;
-      drag /= span;
+      if (m_.n_tris == 0) {  // (a mesh body's force is the whole body's)
+        const double span = double(m_.hi[2]) - double(m_.lo[2]);
+        lift /= span;
+        drag /= span;
+      }
     }
     return {{"vmax", std::sqrt(double(r.sums.vmax2))},
             {"lift", lift},
@@ -206,6 +219,7 @@ class Pipeline {
   Buf<unsigned char> foil_flag_;
   Buf<StepSums> items_;
   Buf<int> leaving_;  // this step's leaving particles (the inflow conveyor)
+  std::unique_ptr<MeshTree<Exec>> body_tree_;  // D = 3: the mesh body's triangles (model.h)
   int parity_ = 0;
 };
 

@@ -164,6 +164,23 @@ CPS_HD CPS_INLINE Vec<D> boundary_forces(const Model<D>& m, const AirfoilFrame& 
       scattered = 1;
     }
   }
+  if constexpr (D == 3) {
+    // the mesh body (model.h): the signed distance to its triangles through their tree; the
+    // body gets -f at the closest point (force; moment about z and the whole torque about body_ref)
+    MeshHit hit;
+    Vec3 f3;
+    if (m.n_tris > 0 && mesh_contact_force(m.wing, m.body, x, v, m.radius, f3, mag, hit)) {
+      F += f3;
+      pressure += mag;
+      contacts += 1;
+      const Vec3 fa = -f3, r = hit.closest - m.body_ref;
+      s.force += fa;
+      s.moment += r[0] * fa[1] - r[1] * fa[0];
+      s.torque += cross(r, fa);
+      s.contacts += 1;
+      scattered = 1;
+    }
+  }
   return F;
 }
 
@@ -417,6 +434,10 @@ CPS_HD CPS_INLINE bool keep_out(const Model<D>& m, const AirfoilFrame& af, Vec<D
     set_xy(v, v2);
     moved = true;
   }
+  if constexpr (D == 3) {
+    // the mesh body: a centre that got inside is put back on its surface (dem/mesh_body.h)
+    if (m.n_tris > 0 && mesh_keep_out(m.body, m.radius, x, v)) moved = true;
+  }
   return moved;
 }
 
@@ -446,7 +467,9 @@ struct Finalize {
   const Model<D>* model;
   const Control* ctl;
   CPS_HD void begin(Scene<D>& G) const { G.n_leaving = 0; }  // this step's list (filled by the integration)
-  CPS_HD bool sums_finite(const StepSums<D>& S) const { return finite(S.force[0] + S.force[1] + S.moment); }
+  CPS_HD bool sums_finite(const StepSums<D>& S) const {
+    return finite(S.force[0] + S.force[1] + S.moment + S.torque[0] + S.torque[1] + S.torque[2]);
+  }
   CPS_HD void taken(Scene<D>& G, const StepSums<D>& S, float dt) const {
     const Model<D>& m = *model;
     if (G.clock.time >= m.measure_start) accumulate_blocks(G, S, double(dt));

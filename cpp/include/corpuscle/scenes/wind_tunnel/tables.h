@@ -20,6 +20,7 @@
   X(airfoil_moment, float, 1, sums.moment, true)                  \
   X(wall_force, float, D, sums.wall_force, true)                  \
   X(total_force, float, D, sums.total_force, true)                \
+  X(body_torque, float, 3, sums.torque, true)                    \
   X(airfoil_contacts, int, 1, sums.contacts, true)                \
   X(recycled, long long, 1, recycled, true)                       \
   X(pushouts, long long, 1, pushouts, true)                       \
