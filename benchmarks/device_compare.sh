@@ -20,6 +20,8 @@
 #   box1m   corpuscle bench fluid-box --particles 1048576 --steps 50 --repeats 3 --warmup 10 (1,056,321)
 #   wt      corpuscle bench wind-tunnel --steps 200 --repeats 3 --warmup 50   (2,097,152 particles)
 #   dsph    corpuscle run dam-break-dsph --json --out /tmp/...   (the whole run, 1,030,400 fluid, about 45 s)
+#   chip    the batch on the 8-ball's chip path (--path chip; this tree only: the base's is `batch`,
+#           which runs --path general on a tree that has the choice)
 #
 # Environment: OUT (logs; default ./out), BACKEND (default cuda), ROUNDS (turns of each bench case, default 2; the
 # whole dam-break run takes one), CASES (a subset, e.g. "m8 batch"), STEPS (default
@@ -84,11 +86,20 @@ run_all() {
     [box1m]="bench fluid-box $B --particles 1048576 --steps 50 --repeats 3 --warmup 10"
     [wt]="bench wind-tunnel $B --steps 200 --repeats 3 --warmup 50"
     [dsph]="run dam-break-dsph $B --json --out /tmp/dc_whole.cps"
+    [chip]="bench magic8ball $B --particles 1000 --batch 4096 --steps 100 --repeats 3 --path chip"
   )
+  # the batch case times the general path on a tree that also has the chip path (bench --path);
+  # `chip` (this tree only) times the chip path
+  knows_path() {
+    local pp=${PYTHONPATH:-}
+    [ "$1" = base ] && pp=/tmp/t_base${PYTHONPATH:+:$PYTHONPATH}
+    PYTHONPATH=$pp python3 -m corpuscle bench --help 2>/dev/null | grep -q -- "--path"
+  }
   # one timing: corpuscle ARGS on tree T (base: /tmp/t_base first on the path), its JSON kept
   one() {
     local case=$1 tree=$2 round=$3 js=/tmp/dc_$$.json pp=${PYTHONPATH:-} limit=90 a
     a=${args[$case]}
+    [ "$case" = batch ] && knows_path "$tree" && a="$a --path general"
     [ "$tree" = base ] && pp=/tmp/t_base${PYTHONPATH:+:$PYTHONPATH}
     if [ "$case" = dsph ]; then
       limit=150
@@ -120,7 +131,10 @@ PY
       [ -n "${args[$c]:-}" ] || { say "unknown case $c"; continue; }
       [ "$c" = dsph ] && [ "$r" -gt 1 ] && continue
       if [ $((SECONDS - t0)) -ge "$budget" ]; then say "time budget spent: $c round $r skipped"; continue; fi
-      for tree in $order; do one "$c" "$tree" "$r"; done
+      for tree in $order; do
+        [ "$c" = chip ] && [ "$tree" = base ] && continue
+        one "$c" "$tree" "$r"
+      done
     done
   done
   say table
