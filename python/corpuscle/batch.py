@@ -154,8 +154,8 @@ class Batch:
 
         ``path``: how the device steps the scenes: ``"chip"`` (a block per scene, the scene in
         the multiprocessor's shared memory, many steps a launch: docs/magic8ball.md),
-        ``"general"`` (the engine's stages over global memory), or ``"auto"`` (chip where the
-        scenes fit on the cuda backend, else general); None: the scene's ``sph.path``.
+        ``"general"`` (the engine's stages over global memory), or ``"auto"`` (general: the chip
+        path measured slower, docs/magic8ball.md); None: the scene's ``sph.path``.
         ``"chip"`` on a CPU backend, or where a scene does not fit, is a ``ValueError``.
         :attr:`path` says which runs.
 

@@ -41,7 +41,7 @@ def _configure_bench(p: argparse.ArgumentParser) -> None:
                         "reports scene-steps/s and particle-steps/s")
     p.add_argument("--path", choices=("auto", "general", "chip"),
                    help="magic8ball on cuda: step on chip (a thread block per scene, the scene in shared memory, many "
-                        "steps a launch) or the general path; auto (the default): chip for a batch whose scenes fit. "
+                        "steps a launch) or the general path; auto (the default): general (chip measured slower). "
                         "The row's `path` says which ran")
     p.add_argument("--json", metavar="FILE", help="also write the results as a JSON list of rows to FILE")
     p.add_argument("--force", action="store_true", help="replace an existing output file of another kind than its name says")

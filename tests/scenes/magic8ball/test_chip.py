@@ -201,8 +201,10 @@ def cuda_pair(n, particles, **kw):
 
 
 @pytest.mark.gpu
-def test_cuda_chooses_chip_for_batches_that_fit(cuda):
-    assert make("auto", backend="cuda", n=64, particles=1000).path == "chip"
+def test_cuda_auto_takes_the_general_path_and_chip_runs_where_it_fits(cuda):
+    # auto is general (the chip path measured slower: docs/magic8ball.md); chip when forced
+    assert make("auto", backend="cuda", n=64, particles=1000).path == "general"
+    assert make("chip", backend="cuda", n=64, particles=1000).path == "chip"
     assert make("auto", backend="cuda", n=1, particles=1000).path == "general"
     assert make("auto", backend="cuda", n=8, particles=20000).path == "general"  # does not fit a block
     with pytest.raises(ValueError, match="shared memory a block"):

@@ -108,15 +108,16 @@ class Pipeline {
   }
 
   // The chip path (chip.h: a block per scene, K steps a launch) where the scenes fit a block's
-  // shared memory: chosen for a batch on a device (path -1), forced by path 1 (a device) or 2
+  // shared memory: forced by path 1 (a device) or 2
   // (also the CPU's emulated tiles: the tests'); the general path for the rest. The lists
   // index has it (its lists, in the pipeline's buffers, are the one array off chip)
   static constexpr bool kChipIndex = Index::lists;
   static bool choose_chip(Exec& ex, const Model& m) {
-    if (m.path == 0) return false;
+    // auto (path -1) takes the general path: measured on an H200 (batch 4,096 x 1,000), the chip
+    // path ran 0.70x the general one (docs/magic8ball.md); it is chosen only when asked for
+    if (m.path <= 0) return false;
     const size_t limit = ex.tile_shared_limit();
     const bool fits = kChipIndex && chip_fits(m, limit);
-    if (m.path < 0) return Exec::on_device && m.n_scenes > 1 && fits;
     if (m.path == 1 && !Exec::on_device)
       throw Error("magic8ball: path = chip runs on the cuda backend (the CPU backends step the general path)");
     if (!kChipIndex)
