@@ -436,7 +436,7 @@ class SphBox(Kind):
         out = {}
         p, vel, w = s["probe_pressure"], s["probe_velocity"], s["probe_weight"]
         nan = float("nan")
-        gauges = sim.info.get("probe_gauges") or [False] * len(sim.info["probe_names"])
+        gauges = sim.info["probe_gauges"]
         for k, name in enumerate(sim.info["probe_names"]):
             if gauges[k]:
                 x0 = sim.info["probe_positions"][k]
@@ -475,7 +475,7 @@ class SphBox(Kind):
         rec = super().frame(sim, ghosts=ghosts, velocity=velocity)
         if sim.info["probe_names"]:
             ser = self._probe_series(sim)
-            gauges = sim.info.get("probe_gauges") or [False] * len(ser.names)
+            gauges = sim.info["probe_gauges"]
             for k, name in enumerate(ser.names):
                 value = "level" if gauges[k] else "pressure"
                 t, p = ser.t[k][ser.recorded[k]:], ser.p[k][ser.recorded[k]:]
